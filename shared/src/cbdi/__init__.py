@@ -1,0 +1,1 @@
+"""cbdi common library: bus, keys, wire types, clock, service runtime, launcher."""

@@ -1,0 +1,35 @@
+"""Wire types used by every service: errors on the bus, acknowledgements, run control."""
+
+from __future__ import annotations
+
+from cbdi.wire.base import Message
+
+__all__ = ["ErrorReply", "ErrorReport", "RunFinished"]
+
+
+class ErrorReply(Message, tag="cbdi.ErrorReply/1"):
+    """Answer a request that could not be served; `code` is machine-readable.
+
+    Codes in use: `bad_message` (undecodable payload), `unknown_agent`, `internal`.
+    """
+
+    code: str
+    message: str
+
+
+class ErrorReport(Message, tag="cbdi.ErrorReport/1"):
+    """Report bad input a service received and survived, on its error stream."""
+
+    service: str
+    key: str
+    code: str
+    message: str
+    count: int
+
+
+class RunFinished(Message, tag="cbdi.RunFinished/1"):
+    """Announce that a run ended: `reason` is `done` (all litter recycled) or `time_limit`."""
+
+    reason: str
+    epoch: int
+    time: float
