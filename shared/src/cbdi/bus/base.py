@@ -1,0 +1,79 @@
+"""The one bus interface of cbdi: publish, subscribe, request/reply and liveliness.
+
+Services only ever talk to a `Bus`. `ZenohBus` is the real one (client of a router, or a
+peer); `MemoryBus` is in-process and deterministic, for tests of logic. Payloads are bytes
+here; typed messages are encoded and decoded by `cbdi.bus.typed` on top of this.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+__all__ = ["AliveEvent", "Bus", "Handler", "Sample", "Subscription", "Token"]
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """A published payload and the concrete key it was published on."""
+
+    key: str
+    payload: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class AliveEvent:
+    """A liveliness token appeared (`alive`) or vanished (not `alive`)."""
+
+    key: str
+    alive: bool
+
+
+# A request handler gets the concrete key and the request payload, returns the reply.
+Handler = Callable[[str, bytes], Awaitable[bytes]]
+
+
+class Subscription(Protocol):
+    """An open subscription: iterate it for samples, close it when done."""
+
+    def __aiter__(self) -> AsyncIterator[Sample]: ...
+    async def close(self) -> None: ...
+
+
+class Token(Protocol):
+    """A declared liveliness token; undeclare it with `close`."""
+
+    async def close(self) -> None: ...
+
+
+class Bus(Protocol):
+    """Everything a service may do on the network."""
+
+    async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
+        """Publish `payload` on `key`; `block` (commands, plans) never drops under load."""
+        ...
+
+    def subscribe(self, key_expr: str) -> Subscription:
+        """Subscribe to `key_expr` (wildcards allowed); samples queue until iterated."""
+        ...
+
+    async def request(self, key: str, payload: bytes, *, timeout: float = 2.0) -> bytes:
+        """Send a request and return the first reply; raise RequestTimeoutError if none."""
+        ...
+
+    async def serve(self, key_expr: str, handler: Handler) -> None:
+        """Answer requests on `key_expr` with `handler` until cancelled."""
+        ...
+
+    async def declare_token(self, key: str) -> Token:
+        """Declare a liveliness token that lives until closed or until this bus dies."""
+        ...
+
+    def watch_alive(self, key_expr: str) -> AsyncIterator[AliveEvent]:
+        """Yield liveliness changes under `key_expr`, starting with tokens alive now."""
+        ...
+
+    async def close(self) -> None:
+        """Close the bus and everything declared on it; idempotent."""
+        ...

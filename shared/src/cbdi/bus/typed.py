@@ -1,0 +1,135 @@
+"""Typed messaging on top of any `Bus`: encode on the way out, validate on the way in.
+
+Bad input never kills the caller: an undecodable sample is handed to the `ErrorSink`
+(which logs, counts and reports it) and skipped; a bad request is answered with an
+`ErrorReply` naming what was wrong.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Awaitable, Callable
+from typing import Protocol, TypeVar
+
+from cbdi import keys
+from cbdi.bus.base import Bus, Subscription
+from cbdi.errors import CbdiError, RequestFailedError, WireError
+from cbdi.wire.base import Message, decode, decode_any, encode
+from cbdi.wire.common import ErrorReply
+
+__all__ = ["ErrorSink", "LogSink", "messages", "publish", "request", "serve"]
+
+M = TypeVar("M", bound=Message)
+R = TypeVar("R", bound=Message)
+
+
+class ErrorSink(Protocol):
+    """Where bad input goes: the service runtime logs it, counts it and reports it."""
+
+    def bad_input(self, key: str, error: CbdiError) -> None: ...
+
+    def crashed(self, key: str, error: Exception) -> None: ...
+
+
+class LogSink:
+    """An `ErrorSink` that only remembers what it got (tests, small tools)."""
+
+    def __init__(self) -> None:
+        self.errors: list[tuple[str, Exception]] = []
+
+    def bad_input(self, key: str, error: CbdiError) -> None:
+        self.errors.append((key, error))
+
+    def crashed(self, key: str, error: Exception) -> None:
+        self.errors.append((key, error))
+
+
+async def publish(bus: Bus, key: str, message: Message, *, block: bool = False) -> None:
+    """Encode and publish `message` on `key`."""
+    await bus.publish(key, encode(message), block=block)
+
+
+def messages(
+    bus: Bus, key_expr: str, cls: type[M], sink: ErrorSink
+) -> AsyncIterator[tuple[str, M]]:
+    """Yield `(key, message)` for every valid `cls` sample on `key_expr`; skip bad ones.
+
+    The subscription is declared now, not at the first iteration, so a service that
+    declares liveliness after this call is guaranteed to receive what follows.
+    """
+    return _decoded(bus.subscribe(key_expr), cls, sink)
+
+
+async def _decoded(
+    sub: Subscription, cls: type[M], sink: ErrorSink
+) -> AsyncIterator[tuple[str, M]]:
+    try:
+        async for sample in sub:
+            try:
+                message = decode(sample.payload, cls, sample.key)
+            except WireError as exc:
+                sink.bad_input(sample.key, exc)
+                continue
+            yield sample.key, message
+    finally:
+        await sub.close()
+
+
+async def request(
+    bus: Bus, key: str, message: Message, reply_cls: type[R], *, timeout: float = 2.0
+) -> R:
+    """Send a typed request; return the typed reply or raise RequestFailedError."""
+    payload = await bus.request(key, encode(message), timeout=timeout)
+    reply = decode_any(payload, (reply_cls, ErrorReply), key)
+    if isinstance(reply, ErrorReply):
+        raise RequestFailedError(key, reply.code, reply.message)
+    return reply  # type: ignore[return-value]
+
+
+async def serve(
+    bus: Bus,
+    key_expr: str,
+    request_cls: type[M],
+    handler: Callable[[str, M], Awaitable[Message]],
+    sink: ErrorSink,
+    *,
+    trace: bool = True,
+) -> None:
+    """Answer typed requests on `key_expr` until cancelled.
+
+    With `trace`, each request and its reply are mirrored on `cbdi/trace/...` so that a
+    recorder subscribed to `cbdi/**` sees RPC traffic too (Zenoh does not show queries to
+    subscribers).
+    """
+
+    async def answer(key: str, payload: bytes) -> bytes:
+        if trace:
+            await bus.publish(keys.trace(key) + "/request", payload)
+        reply = await _reply_to(key, payload, request_cls, handler, sink)
+        encoded = encode(reply)
+        if trace:
+            await bus.publish(keys.trace(key) + "/reply", encoded)
+        return encoded
+
+    await bus.serve(key_expr, answer)
+
+
+async def _reply_to(
+    key: str,
+    payload: bytes,
+    request_cls: type[M],
+    handler: Callable[[str, M], Awaitable[Message]],
+    sink: ErrorSink,
+) -> Message:
+    try:
+        req = decode(payload, request_cls, key)
+    except WireError as exc:
+        sink.bad_input(key, exc)
+        return ErrorReply(code="bad_message", message=str(exc))
+    try:
+        return await handler(key, req)
+    except CbdiError as exc:
+        sink.bad_input(key, exc)
+        return ErrorReply(code=getattr(exc, "code", "error"), message=str(exc))
+    except Exception as exc:  # a handler bug must not take the service down
+        sink.crashed(key, exc)
+        return ErrorReply(code="internal", message=f"{type(exc).__name__}: {exc}")

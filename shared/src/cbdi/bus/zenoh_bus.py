@@ -1,0 +1,241 @@
+"""The real `Bus`: Eclipse Zenoh, as a client of a router or as a peer.
+
+Zenoh's Python API calls back on its own threads. Every callback here does one thing:
+hand the item to the asyncio loop with `call_soon_threadsafe`. The session is always
+closed in `close()` (an unclosed session with callback subscribers hangs at exit).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import zenoh
+from zenoh.handlers import Callback
+
+from cbdi.bus.base import AliveEvent, Handler, Sample
+from cbdi.errors import BusClosedError, ConfigError, RequestFailedError, RequestTimeoutError
+
+__all__ = ["BusConfig", "ZenohBus", "open_bus", "zenoh_config"]
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """How a service joins the Zenoh network.
+
+    `client` (default) connects to the router(s) in `connect` and waits up to
+    `connect_timeout` seconds for one to come up; `peer` listens on `listen` and connects
+    to `connect` directly, with gossip scouting so that three or more peers find each other.
+    """
+
+    mode: str = "client"
+    connect: tuple[str, ...] = (DEFAULT_ENDPOINT,)
+    listen: tuple[str, ...] = ()
+    connect_timeout: float = 10.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def zenoh_config(cfg: BusConfig) -> zenoh.Config:
+    """Build the Zenoh configuration for `cfg` (multicast scouting off: explicit endpoints)."""
+    if cfg.mode not in ("client", "peer", "router"):
+        raise ConfigError("bus", "mode", f"expected client, peer or router, got {cfg.mode!r}")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(cfg.mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if cfg.connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
+    if cfg.listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(cfg.listen)))
+    timeout_ms = int(cfg.connect_timeout * 1000)
+    conf.insert_json5("connect/timeout_ms", json.dumps({cfg.mode: timeout_ms}))
+    if cfg.mode == "peer":
+        conf.insert_json5("scouting/gossip/enabled", "true")
+    for key, value in cfg.extra.items():
+        conf.insert_json5(key, json.dumps(value))
+    return conf
+
+
+async def open_bus(cfg: BusConfig) -> ZenohBus:
+    """Open a Zenoh session without blocking the loop (a client may wait for its router)."""
+    conf = zenoh_config(cfg)
+    try:
+        session = await asyncio.to_thread(zenoh.open, conf)
+    except zenoh.ZError as exc:
+        endpoints = ", ".join(cfg.connect) or "(none)"
+        raise ConfigError("bus", "connect", f"cannot join Zenoh via {endpoints}: {exc}") from None
+    return ZenohBus(session, asyncio.get_running_loop())
+
+
+def _post(loop: asyncio.AbstractEventLoop, fn: Any, *args: Any) -> None:
+    """Hand a call to the loop from a Zenoh thread; a closed loop means we are exiting."""
+    with contextlib.suppress(RuntimeError):
+        loop.call_soon_threadsafe(fn, *args)
+
+
+class _ZenohSubscription:
+    def __init__(self, bus: ZenohBus, key_expr: str) -> None:
+        self.queue: asyncio.Queue[Sample | None] = asyncio.Queue()
+        loop, put = bus.loop, self.queue.put_nowait
+
+        def on_sample(s: zenoh.Sample) -> None:
+            _post(loop, put, Sample(str(s.key_expr), s.payload.to_bytes()))
+
+        self._bus = bus
+        self._sub: Any = bus.session.declare_subscriber(
+            key_expr, Callback(on_sample, indirect=False)
+        )
+        bus._closeables.add(self)
+
+    def __aiter__(self) -> AsyncIterator[Sample]:
+        return self._iterate()
+
+    async def _iterate(self) -> AsyncIterator[Sample]:
+        while (sample := await self.queue.get()) is not None:
+            yield sample
+
+    async def close(self) -> None:
+        if self._sub is not None:
+            sub, self._sub = self._sub, None
+            self._bus._closeables.discard(self)
+            with contextlib.suppress(zenoh.ZError):
+                sub.undeclare()
+            self.queue.put_nowait(None)
+
+
+class _ZenohToken:
+    def __init__(self, bus: ZenohBus, key: str) -> None:
+        self._bus = bus
+        self._token: Any = bus.session.liveliness().declare_token(key)
+        bus._closeables.add(self)
+
+    async def close(self) -> None:
+        if self._token is not None:
+            token, self._token = self._token, None
+            self._bus._closeables.discard(self)
+            with contextlib.suppress(zenoh.ZError):
+                token.undeclare()
+
+
+class ZenohBus:
+    """`cbdi.bus.Bus` over an open Zenoh session."""
+
+    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop) -> None:
+        self.session = session
+        self.loop = loop
+        self._closeables: set[_ZenohSubscription | _ZenohToken] = set()
+        self._closed = False
+
+    def _check(self) -> None:
+        if self._closed:
+            raise BusClosedError("zenoh bus is closed")
+
+    async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
+        self._check()
+        cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+        self.session.put(key, payload, congestion_control=cc)
+
+    def subscribe(self, key_expr: str) -> _ZenohSubscription:
+        self._check()
+        return _ZenohSubscription(self, key_expr)
+
+    async def request(self, key: str, payload: bytes, *, timeout: float = 2.0) -> bytes:
+        self._check()
+        loop = self.loop
+        future: asyncio.Future[bytes] = loop.create_future()
+
+        def settle(result: bytes | BaseException) -> None:
+            if future.done():
+                return
+            if isinstance(result, BaseException):
+                future.set_exception(result)
+            else:
+                future.set_result(result)
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            ok = reply.ok
+            if ok is not None:
+                _post(loop, settle, ok.payload.to_bytes())
+            else:
+                err = reply.err
+                text = err.payload.to_string() if err is not None else "unknown error"
+                _post(loop, settle, RequestFailedError(key, "zenoh_error", text))
+
+        def on_done() -> None:
+            _post(loop, settle, RequestTimeoutError(key, timeout))
+
+        self.session.get(
+            key,
+            Callback(on_reply, on_done, indirect=False),
+            payload=payload,
+            timeout=timeout,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+        )
+        async with asyncio.timeout(timeout + 1.0):
+            return await future
+
+    async def serve(self, key_expr: str, handler: Handler) -> None:
+        self._check()
+        queue: asyncio.Queue[zenoh.Query] = asyncio.Queue()
+        loop, put = self.loop, queue.put_nowait
+
+        def on_query(query: zenoh.Query) -> None:
+            _post(loop, put, query)
+
+        queryable = self.session.declare_queryable(
+            key_expr, Callback(on_query, indirect=False), complete=True
+        )
+        try:
+            while True:
+                query = await queue.get()
+                await self._answer(query, handler)
+        finally:
+            with contextlib.suppress(zenoh.ZError):
+                queryable.undeclare()
+
+    async def _answer(self, query: zenoh.Query, handler: Handler) -> None:
+        key = str(query.key_expr)
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        try:
+            reply = await handler(key, payload)
+            query.reply(query.key_expr, reply)
+        except zenoh.ZError:
+            pass  # the requester went away; nothing to answer
+        finally:
+            query.drop()
+
+    async def declare_token(self, key: str) -> _ZenohToken:
+        self._check()
+        return _ZenohToken(self, key)
+
+    async def watch_alive(self, key_expr: str) -> AsyncIterator[AliveEvent]:
+        self._check()
+        queue: asyncio.Queue[AliveEvent] = asyncio.Queue()
+        loop, put = self.loop, queue.put_nowait
+
+        def on_sample(s: zenoh.Sample) -> None:
+            alive = s.kind == zenoh.SampleKind.PUT
+            _post(loop, put, AliveEvent(str(s.key_expr), alive))
+
+        sub = self.session.liveliness().declare_subscriber(
+            key_expr, Callback(on_sample, indirect=False), history=True
+        )
+        try:
+            while True:
+                yield await queue.get()
+        finally:
+            with contextlib.suppress(zenoh.ZError):
+                sub.undeclare()
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for item in list(self._closeables):
+            await item.close()
+        await asyncio.to_thread(self.session.close)

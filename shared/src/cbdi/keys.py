@@ -1,0 +1,139 @@
+"""Build every Zenoh key expression of cbdi. No key string is spelled anywhere else.
+
+Layout (documented in docs/protocol.md):
+
+- per agent: `cbdi/<agent>/<component>/<stream>`, e.g. `cbdi/robot1/executor/ack`
+- shared world: `cbdi/world/<stream>` and per-agent world streams
+  `cbdi/world/<stream>/<agent>` (percepts, outcomes)
+- requests (queryables): `cbdi/world/rpc/<name>`, `cbdi/<agent>/<component>/rpc/<name>`
+- error streams: `cbdi/world/errors`, `cbdi/<agent>/<component>/errors`
+- liveliness tokens: `cbdi/alive/<service-id>` where the service id is `world`,
+  `monitor`, or `<agent>/<component>`
+- request tracing for recorders: `cbdi/trace/<request key>`
+"""
+
+from __future__ import annotations
+
+import re
+
+__all__ = [
+    "ALIVE_ALL",
+    "CLOCK",
+    "EVENTS",
+    "SNAPSHOT",
+    "STATS",
+    "ROOT",
+    "WORLD",
+    "agent_ack",
+    "agent_ack_all",
+    "agent_stream",
+    "alive",
+    "component_rpc",
+    "errors",
+    "service_id",
+    "service_of_alive",
+    "trace",
+    "validate_name",
+    "world_outcomes",
+    "world_for_agent",
+    "world_percepts",
+    "world_rpc",
+    "world_stream",
+]
+
+ROOT = "cbdi"
+WORLD = "world"
+ALIVE_ALL = f"{ROOT}/alive/**"
+
+# World streams (published by the world service).
+CLOCK = f"{ROOT}/{WORLD}/clock"
+SNAPSHOT = f"{ROOT}/{WORLD}/snapshot"
+STATS = f"{ROOT}/{WORLD}/stats"
+EVENTS = f"{ROOT}/{WORLD}/events"
+
+# Names that may not be used as agents because they are shared chunks of the layout.
+_RESERVED = {WORLD, "alive", "trace", "monitor", "launcher"}
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]{0,62}$")
+
+
+def validate_name(name: str, what: str = "agent") -> str:
+    """Return `name` if it can be one key chunk, else raise ValueError saying why."""
+    if not _NAME.match(name):
+        raise ValueError(
+            f"{what} name {name!r} must start with a letter and hold only letters, digits,"
+            " '_' or '-' (at most 63 characters)"
+        )
+    if what == "agent" and name in _RESERVED:
+        raise ValueError(f"{what} name {name!r} is reserved by the key layout")
+    return name
+
+
+def world_stream(stream: str) -> str:
+    """Return the key of a shared world stream (`clock`, `snapshot`, `stats`, `events`)."""
+    return f"{ROOT}/{WORLD}/{stream}"
+
+
+def world_percepts(agent: str) -> str:
+    """Return the key on which the world publishes `agent`'s percepts (`*` for all)."""
+    return f"{ROOT}/{WORLD}/percepts/{agent}"
+
+
+def world_outcomes(agent: str) -> str:
+    """Return the key on which the world reports `agent`'s action outcomes (`*` for all)."""
+    return f"{ROOT}/{WORLD}/outcomes/{agent}"
+
+
+def world_for_agent(agent: str) -> str:
+    """Return the key expression matching every world stream addressed to `agent`."""
+    return f"{ROOT}/{WORLD}/*/{agent}"
+
+
+def world_rpc(name: str) -> str:
+    """Return the key of a world request endpoint (`act`, `stats`, `info`)."""
+    return f"{ROOT}/{WORLD}/rpc/{name}"
+
+
+def agent_stream(agent: str, component: str, stream: str) -> str:
+    """Return `cbdi/<agent>/<component>/<stream>`."""
+    return f"{ROOT}/{agent}/{component}/{stream}"
+
+
+def component_rpc(agent: str, component: str, name: str) -> str:
+    """Return the key of a request endpoint of an agent's component."""
+    return f"{ROOT}/{agent}/{component}/rpc/{name}"
+
+
+def agent_ack(agent: str) -> str:
+    """Return the key on which `agent`'s executor acknowledges epochs (lockstep)."""
+    return agent_stream(agent, "executor", "ack")
+
+
+def agent_ack_all() -> str:
+    """Return the key expression matching every agent's epoch acknowledgements."""
+    return agent_stream("*", "executor", "ack")
+
+
+def service_id(component: str, agent: str | None = None) -> str:
+    """Return the id of a service: `world`, `monitor`, or `<agent>/<component>`."""
+    return f"{agent}/{component}" if agent else component
+
+
+def alive(service: str) -> str:
+    """Return the liveliness token key of a service id."""
+    return f"{ROOT}/alive/{service}"
+
+
+def service_of_alive(key: str) -> str:
+    """Return the service id of a liveliness token key (inverse of `alive`)."""
+    prefix = f"{ROOT}/alive/"
+    return key[len(prefix) :] if key.startswith(prefix) else key
+
+
+def errors(service: str) -> str:
+    """Return the error stream of a service id (`world` or `<agent>/<component>`)."""
+    return f"{ROOT}/{service}/errors"
+
+
+def trace(key: str) -> str:
+    """Return the trace key on which the request helper mirrors requests and replies."""
+    return f"{ROOT}/trace/{key.removeprefix(ROOT + '/')}"

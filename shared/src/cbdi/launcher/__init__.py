@@ -1,0 +1,1 @@
+"""The launcher: `cbdi up SCENARIO` runs a scenario as supervised OS processes."""

@@ -1,0 +1,114 @@
+"""`cbdi up SCENARIO`: the launcher's command line."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from collections.abc import Sequence
+from dataclasses import replace
+
+import uvloop
+
+from cbdi.errors import ConfigError
+from cbdi.launcher.process import RESTART_POLICIES, RestartPolicy
+from cbdi.launcher.run import LaunchOptions, RunSummary, launch
+from cbdi.launcher.scenario import Scenario, find_scenario, load_scenario
+
+__all__ = ["main"]
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE = 0, 1, 2, 3
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="cbdi up",
+        description="Run a scenario: a Zenoh router, the world and every agent's services as "
+        "separate processes. Exit codes: 0 run ended as asked, 1 a service failed, "
+        "2 bad usage or scenario, 3 the time limit came before all litter was recycled.",
+    )
+    p.add_argument("scenario", help="scenario name (domains/recycling/scenarios/NAME.toml) or file")
+    p.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
+    p.add_argument("--speed", type=float, help="simulated seconds per wall second")
+    p.add_argument("--seed", type=int, help="seed of the world's random generator")
+    p.add_argument("--until", help="'done' (all litter recycled) or simulated SECONDS")
+    p.add_argument("--max-time", type=float, help="simulated seconds before a 'done' run gives up")
+    p.add_argument("--lockstep", action=argparse.BooleanOptionalAction, default=None,
+                   help="advance an epoch only once every agent acknowledged the last one")
+    p.add_argument("--json", action="store_true", help="print a JSON summary on stdout at the end")
+    p.add_argument("--view", choices=("none", "text"), default="none",
+                   help="show the world every epoch (text: a character grid)")
+    p.add_argument("--restart", choices=RESTART_POLICIES, default="on-failure",
+                   help="restart policy of crashed services")
+    p.add_argument("--max-restarts", type=int, default=3, help="restarts per service at most")
+    p.add_argument("--port", type=int, default=0, help="router port (default: a free one)")
+    p.add_argument("--startup-timeout", type=float, default=30.0, help="seconds to become alive")
+    p.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit in seconds")
+    p.add_argument("--quiet", action="store_true", help="do not echo the services' logs")
+    return p
+
+
+def _scenario(args: argparse.Namespace) -> Scenario:
+    scenario = load_scenario(find_scenario(args.scenario))
+    run = scenario.run
+    if args.until is not None:
+        if args.until != "done":
+            try:
+                if float(args.until) <= 0:
+                    raise ValueError
+            except ValueError:
+                raise ConfigError("--until", "until", "expected 'done' or seconds > 0") from None
+        run = replace(run, until=args.until)
+    for name in ("speed", "seed", "max_time", "lockstep"):
+        value = getattr(args, name)
+        if value is not None:
+            run = replace(run, **{name: value})
+    if run.speed <= 0:
+        raise ConfigError("--speed", "speed", "must be > 0")
+    scenario = replace(scenario, run=run)
+    return scenario.with_agents(args.agents) if args.agents else scenario
+
+
+def _say_factory(quiet: bool) -> object:
+    def say(service: str, line: str) -> None:
+        if quiet and service != "launcher":
+            return
+        sys.stderr.write(f"{service:<18}| {line}\n")
+        sys.stderr.flush()
+
+    return say
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run `cbdi up` and return its exit code."""
+    args = _parser().parse_args(list(argv) if argv is not None else None)
+    try:
+        scenario = _scenario(args)
+        policy = RestartPolicy(mode=args.restart, max_restarts=args.max_restarts)
+    except (ConfigError, ValueError) as exc:
+        print(f"cbdi up: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    opts = LaunchOptions(restart=policy, port=args.port, startup_timeout=args.startup_timeout,
+                         wall_timeout=args.timeout, view=args.view, quiet=args.quiet)
+    say = _say_factory(args.quiet)
+    summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]
+    _report(summary, args.json)
+    if summary.ok:
+        return EXIT_OK
+    return EXIT_INCOMPLETE if summary.result == "incomplete" else EXIT_FAILED
+
+
+def _report(summary: RunSummary, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(dataclasses.asdict(summary), indent=2))
+        return
+    line = f"run {summary.result}"
+    if summary.reason:
+        line += f" ({summary.reason})"
+    line += f": {summary.epochs} epochs, {summary.sim_time:.1f} simulated s, "
+    line += f"{summary.wall_time:.1f} wall s"
+    print(line, file=sys.stderr)
+    for name, counts in summary.stats.get("agents", {}).items():
+        text = " ".join(f"{k}={v}" for k, v in counts.items())
+        print(f"  {name}: {text}", file=sys.stderr)

@@ -1,0 +1,149 @@
+"""One supervised OS process of a run: started, log-prefixed, restarted by policy."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+__all__ = ["ManagedProcess", "ProcessSpec", "RestartPolicy"]
+
+RESTART_POLICIES = ("never", "on-failure", "always")
+
+
+@dataclass(frozen=True)
+class RestartPolicy:
+    """When to restart a process that exited on its own, and how often at most."""
+
+    mode: str = "on-failure"
+    max_restarts: int = 3
+    backoff: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.mode not in RESTART_POLICIES:
+            raise ValueError(f"restart policy must be one of {RESTART_POLICIES}, got {self.mode!r}")
+
+    def should_restart(self, returncode: int, restarts: int) -> bool:
+        """Decide on a restart after an exit with `returncode` (negative: killed by signal)."""
+        if restarts >= self.max_restarts or self.mode == "never":
+            return False
+        return self.mode == "always" or returncode != 0
+
+
+@dataclass(frozen=True)
+class ProcessSpec:
+    """What to run: a service id (`world`, `robot1/executor`), its argv and environment."""
+
+    service: str
+    argv: tuple[str, ...]
+    env: dict[str, str] = field(default_factory=dict)
+
+
+LineSink = Callable[[str, str], None]
+
+
+class ManagedProcess:
+    """A child process whose output lines go to `sink(service, line)`."""
+
+    def __init__(self, spec: ProcessSpec, policy: RestartPolicy, sink: LineSink) -> None:
+        self.spec = spec
+        self.policy = policy
+        self.sink = sink
+        self.proc: asyncio.subprocess.Process | None = None
+        self.restarts = 0
+        self.exit_codes: list[int] = []
+        self.tail: deque[str] = deque(maxlen=20)
+        self.stopping = False
+        self.failed = asyncio.Event()
+        self._pumps: list[asyncio.Task[None]] = []
+
+    @property
+    def pid(self) -> int | None:
+        return self.proc.pid if self.proc else None
+
+    async def start(self) -> None:
+        """Start the process (again)."""
+        env = {**os.environ, **self.spec.env}
+        self.proc = await asyncio.create_subprocess_exec(
+            *self.spec.argv,
+            stdin=asyncio.subprocess.DEVNULL,
+            stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.PIPE,
+            env=env,
+            start_new_session=True,  # Ctrl-C reaches the launcher only; it stops children in order
+        )
+        assert self.proc.stdout is not None and self.proc.stderr is not None
+        self._pumps = [
+            asyncio.create_task(self._pump(self.proc.stdout)),
+            asyncio.create_task(self._pump(self.proc.stderr)),
+        ]
+        self.sink("launcher", f"started service={self.spec.service} pid={self.proc.pid}")
+
+    async def _pump(self, stream: asyncio.StreamReader) -> None:
+        while line := await stream.readline():
+            text = line.decode(errors="replace").rstrip("\n")
+            self.tail.append(text)
+            self.sink(self.spec.service, text)
+
+    async def supervise(self) -> None:
+        """Wait for exits and restart by policy until stopped or given up (sets `failed`)."""
+        while True:
+            assert self.proc is not None
+            code = await self.proc.wait()
+            await asyncio.gather(*self._pumps)
+            self.exit_codes.append(code)
+            if self.stopping:
+                return
+            if not self.policy.should_restart(code, self.restarts):
+                self.sink("launcher", f"gave_up service={self.spec.service} exit_code={code}")
+                self.failed.set()
+                return
+            self.restarts += 1
+            self.sink(
+                "launcher",
+                f"restarting service={self.spec.service} exit_code={code} restart={self.restarts}",
+            )
+            await asyncio.sleep(self.policy.backoff)
+            await self.start()
+
+    async def stop(self, grace: float = 5.0) -> None:
+        """Ask the process to stop (SIGTERM), then kill it after `grace` seconds."""
+        self.stopping = True
+        proc = self.proc
+        if proc is None or proc.returncode is not None:
+            return
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signal.SIGTERM)
+        try:
+            async with asyncio.timeout(grace):
+                await proc.wait()
+        except TimeoutError:
+            self.sink("launcher", f"killing service={self.spec.service} after {grace:.0f} s")
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+            await proc.wait()
+
+
+def console_script(name: str, module: str) -> tuple[str, ...]:
+    """Return the argv prefix running console script `name` (next to this Python, or -m)."""
+    import shutil
+    import sys
+    from pathlib import Path
+
+    beside = Path(sys.executable).parent / name
+    if beside.exists():
+        return (str(beside),)
+    found = shutil.which(name)
+    return (found,) if found else (sys.executable, "-m", module)
+
+
+def argv_of(*parts: str | Sequence[str]) -> tuple[str, ...]:
+    """Flatten strings and sequences of strings into one argv tuple."""
+    out: list[str] = []
+    for part in parts:
+        out.extend([part] if isinstance(part, str) else part)
+    return tuple(out)

@@ -1,0 +1,260 @@
+"""`cbdi up`: run a scenario as separate OS processes and report how it went.
+
+Order: the router; the world; every agent's services. Each start waits until the
+service's liveliness token appears (so it is ready), then the run goes on until the world
+announces `RunFinished`, a service fails beyond its restart policy, the wall-clock limit
+passes, or the user presses Ctrl-C. Everything is stopped in reverse order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+import socket
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from cbdi import keys
+from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
+from cbdi.bus.base import Bus
+from cbdi.errors import CbdiError
+from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy, argv_of, console_script
+from cbdi.launcher.scenario import AGENT_KINDS, Scenario
+from cbdi.wire.common import RunFinished
+from cbdi.wire.world import StatsRequest, WorldStats
+
+__all__ = ["LaunchOptions", "RunSummary", "launch"]
+
+
+@dataclass(frozen=True)
+class LaunchOptions:
+    """Options of `cbdi up` beyond the scenario's own run settings."""
+
+    restart: RestartPolicy = field(default_factory=RestartPolicy)
+    port: int = 0
+    startup_timeout: float = 30.0
+    wall_timeout: float = 0.0
+    view: str = "none"
+    quiet: bool = False
+
+
+@dataclass
+class RunSummary:
+    """What `cbdi up --json` prints."""
+
+    scenario: str
+    result: str = "not_started"
+    reason: str = ""
+    epochs: int = 0
+    sim_time: float = 0.0
+    wall_time: float = 0.0
+    stats: dict[str, Any] = field(default_factory=dict)
+    restarts: dict[str, int] = field(default_factory=dict)
+    exit_codes: dict[str, list[int]] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.result in ("done", "time_limit")
+
+
+def free_port() -> int:
+    """Return a TCP port on loopback that was free a moment ago."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _specs(scenario: Scenario, endpoint: str) -> list[ProcessSpec]:
+    env = {"CBDI_CONNECT": endpoint}
+    run = scenario.run
+    world_args = ["--map", str(scenario.map_path), "--speed", str(run.speed)]
+    world_args += ["--seed", str(run.seed)]
+    if run.until == "done":
+        world_args += ["--max-time", str(run.max_time), "--stop-when-done"]
+    else:
+        world_args += ["--max-time", run.until, "--no-stop-when-done"]
+    world_args += ["--lockstep" if run.lockstep else "--no-lockstep"]
+    for agent in scenario.agents:
+        depth = f":{agent.detection_depth}" if agent.detection_depth is not None else ""
+        world_args += ["--agent", f"{agent.name}{depth}"]
+    specs = [
+        ProcessSpec("router", argv_of(console_script("cbdi", "cbdi.cli"), "router",
+                                      "--listen", endpoint), {}),
+        ProcessSpec("world", argv_of(console_script("cbdi-world", "cbdi_world.cli"), world_args), env),
+    ]
+    for agent in scenario.agents:
+        for component in AGENT_KINDS[agent.kind]:
+            specs.append(_agent_spec(agent.name, agent.kind, component, scenario, env))
+    return specs
+
+
+def _agent_spec(
+    name: str, kind: str, component: str, scenario: Scenario, env: dict[str, str]
+) -> ProcessSpec:
+    if kind == "scripted":
+        argv = argv_of(console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli"),
+                       "--agent", name, "--map", str(scenario.map_path))
+        return ProcessSpec(keys.service_id(component, name), argv, env)
+    raise CbdiError(f"agent kind {kind!r} has no services")
+
+
+class _Liveliness:
+    """Track which service ids are alive, from the liveliness tokens."""
+
+    def __init__(self) -> None:
+        self.alive: set[str] = set()
+        self.changed = asyncio.Condition()
+
+    async def follow(self, bus: Bus) -> None:
+        async for event in bus.watch_alive(keys.ALIVE_ALL):
+            service = keys.service_of_alive(event.key)
+            async with self.changed:
+                (self.alive.add if event.alive else self.alive.discard)(service)
+                self.changed.notify_all()
+
+    async def wait_for(self, services: list[str], timeout: float) -> None:
+        async with asyncio.timeout(timeout), self.changed:
+            await self.changed.wait_for(lambda: all(s in self.alive for s in services))
+
+
+async def launch(scenario: Scenario, opts: LaunchOptions, say: Callable[[str, str], None]) -> RunSummary:
+    """Run `scenario` to its end and return the summary; never leaves a child behind."""
+    summary = RunSummary(scenario=scenario.name)
+    endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
+    procs = [ManagedProcess(spec, opts.restart, say) for spec in _specs(scenario, endpoint)]
+    started = time.monotonic()
+    bus: Bus | None = None
+    try:
+        async with asyncio.TaskGroup() as tg:
+            bus = await _start_all(procs, endpoint, opts, tg, summary)
+            await _await_end(bus, procs, scenario, opts, tg, summary, say)
+            raise _Done
+    except* _Done:
+        pass
+    except* (TimeoutError, CbdiError) as group:
+        summary.result = "failed"
+        summary.reason = "; ".join(str(e) or type(e).__name__ for e in group.exceptions)
+    finally:
+        if bus is not None:
+            await _collect_stats(bus, summary)
+        for proc in reversed(procs):
+            await proc.stop()
+        if bus is not None:
+            await bus.close()
+    summary.wall_time = round(time.monotonic() - started, 3)
+    for proc in procs:
+        summary.restarts[proc.spec.service] = proc.restarts
+        summary.exit_codes[proc.spec.service] = proc.exit_codes
+    return summary
+
+
+class _Done(Exception):
+    """End the launcher's TaskGroup once the run is over."""
+
+
+async def _start_all(
+    procs: list[ManagedProcess], endpoint: str, opts: LaunchOptions,
+    tg: asyncio.TaskGroup, summary: RunSummary,
+) -> Bus:
+    summary.result = "starting"
+    router, rest = procs[0], procs[1:]
+    await router.start()
+    tg.create_task(router.supervise())
+    bus = await open_bus(BusConfig(connect=(endpoint,), connect_timeout=opts.startup_timeout))
+    live = _Liveliness()
+    tg.create_task(live.follow(bus))
+    await _wait_alive(live, [router], opts)
+    for group in (rest[:1], rest[1:]):  # the world first, then every agent service at once
+        for proc in group:
+            await proc.start()
+            tg.create_task(proc.supervise())
+        await _wait_alive(live, group, opts)
+    summary.result = "running"
+    return bus
+
+
+async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: LaunchOptions) -> None:
+    names = [p.spec.service for p in group]
+    try:
+        await live.wait_for(names, opts.startup_timeout)
+    except TimeoutError:
+        missing = [n for n in names if n not in live.alive]
+        raise CbdiError(f"not alive after {opts.startup_timeout:.0f} s: {', '.join(missing)}") from None
+
+
+async def _await_end(
+    bus: Bus, procs: list[ManagedProcess], scenario: Scenario, opts: LaunchOptions,
+    tg: asyncio.TaskGroup, summary: RunSummary, say: Callable[[str, str], None],
+) -> None:
+    ended: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+
+    def end(reason: str) -> None:
+        if not ended.done():
+            ended.set_result(reason)
+
+    async def finished() -> None:
+        sink = LogSink()
+        async for _, msg in messages(bus, keys.world_stream("events"), RunFinished, sink):
+            summary.epochs, summary.sim_time = msg.epoch, msg.time
+            end(msg.reason)
+
+    async def failure(proc: ManagedProcess) -> None:
+        await proc.failed.wait()
+        end(f"failed: {proc.spec.service} exited {proc.exit_codes[-1]} and was not restarted")
+
+    watchers = [tg.create_task(finished())] + [tg.create_task(failure(p)) for p in procs]
+    if opts.view == "text":
+        from cbdi.view import follow_text
+
+        watchers.append(tg.create_task(follow_text(bus, sys.stdout)))
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, end, "interrupted")
+    try:
+        async with asyncio.timeout(opts.wall_timeout or None):
+            reason = await ended
+    except TimeoutError:
+        reason = f"failed: wall-clock limit of {opts.wall_timeout:.0f} s reached"
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        for w in watchers:
+            w.cancel()
+    _settle(summary, reason, scenario)
+
+
+def _settle(summary: RunSummary, reason: str, scenario: Scenario) -> None:
+    if reason == "done":
+        summary.result = "done"
+    elif reason == "time_limit":
+        until_done = scenario.run.until == "done"
+        summary.result = "incomplete" if until_done else "time_limit"
+        summary.reason = "time limit reached before all litter was recycled" if until_done else ""
+    else:
+        summary.result = "failed" if reason.startswith("failed") else reason
+        summary.reason = reason
+
+
+async def _collect_stats(bus: Bus, summary: RunSummary) -> None:
+    with contextlib.suppress(CbdiError, TimeoutError):
+        stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats, timeout=2.0)
+        summary.stats = {
+            "epoch": stats.epoch,
+            "time": stats.time,
+            "litter_on_ground": stats.litter_on_ground,
+            "litter_held": stats.litter_held,
+            "litter_recycled": stats.litter_recycled,
+            "litter_spawned": stats.litter_spawned,
+            "agents": {a.agent: _agent_dict(a) for a in stats.agents},
+        }
+        summary.epochs = summary.epochs or stats.epoch
+        summary.sim_time = summary.sim_time or stats.time
+
+
+def _agent_dict(a: Any) -> dict[str, int]:
+    return {k: getattr(a, k) for k in ("moves", "pickups", "recycled", "blocked", "failed",
+                                       "rejected", "contacts")}

@@ -1,0 +1,180 @@
+"""Scenario files: which map, which agents (and of which kind), and run settings.
+
+A scenario lives in `domains/recycling/scenarios/<name>.toml`:
+
+    name = "paper-7x7"
+    map = "../maps/paper-7x7.toml"     # relative to the scenario file
+    [run]
+    speed = 4.0          # simulated seconds per wall second
+    seed = 1
+    until = "done"       # or a number of simulated seconds
+    max_time = 600.0     # simulated seconds after which a "done" run gives up
+    lockstep = false
+    [[agents]]
+    name = "robot1"
+    kind = "scripted"    # which services make up the agent
+    detection_depth = 1
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from cbdi import keys
+from cbdi.errors import ConfigError
+
+__all__ = ["AGENT_KINDS", "AgentEntry", "RunSettings", "Scenario", "find_scenario", "load_scenario"]
+
+# Components each agent kind runs; the scripted agent stands in for a whole BDI agent and
+# takes the executor's place on the bus.
+AGENT_KINDS: dict[str, tuple[str, ...]] = {"scripted": ("executor",)}
+
+
+@dataclass(frozen=True)
+class AgentEntry:
+    """One agent of a scenario."""
+
+    name: str
+    kind: str = "scripted"
+    detection_depth: int | None = None
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How a scenario runs; every field can be overridden from `cbdi up` flags."""
+
+    speed: float = 4.0
+    seed: int = 0
+    until: str = "done"
+    max_time: float = 600.0
+    lockstep: bool = False
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A loaded, validated scenario."""
+
+    name: str
+    path: Path
+    map_path: Path
+    agents: tuple[AgentEntry, ...]
+    run: RunSettings
+
+    def with_agents(self, count: int) -> Scenario:
+        """Return the scenario with `count` agents: the first ones, or more of the last kind."""
+        if count < 1:
+            raise ConfigError("--agents", "agents", f"need at least 1 agent, got {count}")
+        agents = list(self.agents[:count])
+        template = self.agents[-1]
+        names = {a.name for a in agents}
+        n = len(agents)
+        while len(agents) < count:
+            n += 1
+            name = f"robot{n}"
+            if name not in names:
+                agents.append(replace(template, name=name))
+                names.add(name)
+        return replace(self, agents=tuple(agents))
+
+
+def _repo_scenarios() -> list[Path]:
+    places = [Path.cwd() / "domains" / "recycling" / "scenarios"]
+    env = os.environ.get("CBDI_DOMAINS")
+    if env:
+        places.insert(0, Path(env) / "recycling" / "scenarios")
+    # An editable install sits in the repository: shared/src/cbdi/launcher/scenario.py.
+    places.append(Path(__file__).resolve().parents[4] / "domains" / "recycling" / "scenarios")
+    return places
+
+
+def find_scenario(name_or_path: str) -> Path:
+    """Resolve a scenario name (`paper-7x7`) or a path to its file."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ConfigError(name_or_path, "scenario", "file not found")
+        return path
+    for folder in _repo_scenarios():
+        candidate = folder / f"{name_or_path}.toml"
+        if candidate.is_file():
+            return candidate
+    known = sorted({p.stem for f in _repo_scenarios() if f.is_dir() for p in f.glob("*.toml")})
+    raise ConfigError(name_or_path, "scenario", f"no such scenario (known: {', '.join(known)})")
+
+
+def load_scenario(path: Path) -> Scenario:
+    """Load and validate a scenario file; errors name the file and the field."""
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(str(path), "toml", str(exc)) from None
+    where = str(path)
+    map_rel = _get(data, "map", str, where)
+    map_path = (path.parent / map_rel).resolve()
+    if not map_path.is_file():
+        raise ConfigError(where, "map", f"map file {map_path} not found")
+    agents = tuple(_agent(a, i, where) for i, a in enumerate(_get(data, "agents", list, where)))
+    if not agents:
+        raise ConfigError(where, "agents", "a scenario needs at least one agent")
+    if len({a.name for a in agents}) != len(agents):
+        raise ConfigError(where, "agents", "agent names must be unique")
+    return Scenario(
+        name=str(data.get("name", path.stem)),
+        path=path,
+        map_path=map_path,
+        agents=agents,
+        run=_run(data.get("run", {}), where),
+    )
+
+
+def _get(data: dict[str, Any], field: str, tp: type, where: str) -> Any:
+    if field not in data:
+        raise ConfigError(where, field, "missing")
+    value = data[field]
+    if not isinstance(value, tp):
+        raise ConfigError(where, field, f"expected {tp.__name__}, got {type(value).__name__}")
+    return value
+
+
+def _agent(raw: Any, index: int, where: str) -> AgentEntry:
+    field = f"agents[{index}]"
+    if not isinstance(raw, dict):
+        raise ConfigError(where, field, "expected a table")
+    name = _get(raw, "name", str, where)
+    try:
+        keys.validate_name(name)
+    except ValueError as exc:
+        raise ConfigError(where, f"{field}.name", str(exc)) from None
+    kind = raw.get("kind", "scripted")
+    if kind not in AGENT_KINDS:
+        raise ConfigError(where, f"{field}.kind", f"unknown kind {kind!r} (known: {sorted(AGENT_KINDS)})")
+    depth = raw.get("detection_depth")
+    if depth is not None and (not isinstance(depth, int) or depth < 0):
+        raise ConfigError(where, f"{field}.detection_depth", "expected an integer >= 0")
+    return AgentEntry(name=name, kind=kind, detection_depth=depth)
+
+
+def _run(raw: Any, where: str) -> RunSettings:
+    if not isinstance(raw, dict):
+        raise ConfigError(where, "run", "expected a table")
+    base = RunSettings()
+    values: dict[str, Any] = {}
+    for field, default in vars(base).items():
+        if field not in raw:
+            continue
+        value = raw[field]
+        if field == "until":
+            value = str(value)
+        elif isinstance(default, float) and isinstance(value, int):
+            value = float(value)
+        if not isinstance(value, type(default)):
+            raise ConfigError(where, f"run.{field}", f"expected {type(default).__name__}")
+        values[field] = value
+    unknown = set(raw) - set(vars(base))
+    if unknown:
+        raise ConfigError(where, "run", f"unknown settings: {', '.join(sorted(unknown))}")
+    return replace(base, **values)

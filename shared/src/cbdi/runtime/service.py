@@ -1,0 +1,178 @@
+"""The service runtime: every cbdi service is `run_service(settings, component, main)`.
+
+It runs on uvloop, opens the bus, lets `main` declare its subscriptions and start its
+tasks in the one TaskGroup, then declares the service's liveliness token (so "alive"
+means "ready to receive"), reports bad input on the service's error stream, and shuts
+down cleanly on SIGTERM/SIGINT, closing the bus in any case.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import dataclasses
+import signal
+import traceback
+from collections.abc import Awaitable, Callable, Coroutine
+from dataclasses import dataclass, field
+from typing import Any
+
+import uvloop
+
+from cbdi import keys
+from cbdi.bus.base import Bus
+from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig, open_bus
+from cbdi.errors import CbdiError
+from cbdi.runtime.log import Log
+from cbdi.wire.base import encode
+from cbdi.wire.common import ErrorReport
+
+__all__ = ["ServiceContext", "ServiceSettings", "run_service"]
+
+
+@dataclass(frozen=True)
+class ServiceSettings:
+    """Settings every service takes (flags `--connect`, `--mode`, ... or `CBDI_*`)."""
+
+    connect: tuple[str, ...] = field(
+        default=(DEFAULT_ENDPOINT,), metadata={"help": "Zenoh endpoint(s) to connect to"}
+    )
+    mode: str = field(default="client", metadata={"help": "Zenoh mode: client or peer"})
+    listen: tuple[str, ...] = field(default=(), metadata={"help": "endpoints to listen on"})
+    connect_timeout: float = field(default=10.0, metadata={"help": "seconds to wait for a router"})
+    log_level: str = field(default="info", metadata={"help": "debug, info, warning or error"})
+    log_format: str = field(default="kv", metadata={"help": "kv or json"})
+
+    def bus_config(self) -> BusConfig:
+        """Return the bus part of these settings."""
+        return BusConfig(
+            mode=self.mode,
+            connect=tuple(self.connect),
+            listen=tuple(self.listen),
+            connect_timeout=self.connect_timeout,
+        )
+
+
+class _Stop(Exception):
+    """Raised inside the TaskGroup to end the service cleanly."""
+
+
+class ServiceContext:
+    """What a service body gets: the bus, the log, the TaskGroup and an error sink."""
+
+    def __init__(self, service: str, bus: Bus, log: Log, settings: Any = None) -> None:
+        self.service = service
+        self.settings = settings
+        self.bus = bus
+        self.log = log
+        self.counters: collections.Counter[str] = collections.Counter()
+        self.exit_code = 0
+        self._tg: asyncio.TaskGroup | None = None
+        self._stopping = asyncio.Event()
+        self._reports: asyncio.Queue[ErrorReport] = asyncio.Queue()
+
+    def start(self, coro: Coroutine[Any, Any, Any], name: str | None = None) -> asyncio.Task[Any]:
+        """Run `coro` as a task of the service's TaskGroup."""
+        if self._tg is None:
+            raise RuntimeError("the service is not running")
+        return self._tg.create_task(coro, name=name)
+
+    def stop(self, exit_code: int = 0) -> None:
+        """Ask the service to end: every task is cancelled, the bus closed."""
+        self.exit_code = exit_code
+        self._stopping.set()
+
+    # ErrorSink: bad input is logged, counted and reported; the service goes on.
+    def bad_input(self, key: str, error: CbdiError) -> None:
+        code = getattr(error, "code", type(error).__name__)
+        self.counters[f"bad_input.{code}"] += 1
+        self.log.warning("bad_input", key=key, code=code, error=str(error))
+        self._report(key, str(code), str(error))
+
+    def crashed(self, key: str, error: Exception) -> None:
+        self.counters["handler_crash"] += 1
+        self.log.error(
+            "handler_crash", key=key, error=repr(error), trace=traceback.format_exc(limit=5)
+        )
+        self._report(key, "internal", repr(error))
+
+    def _report(self, key: str, code: str, message: str) -> None:
+        total = sum(v for k, v in self.counters.items() if k.startswith("bad_input"))
+        report = ErrorReport(service=self.service, key=key, code=code, message=message, count=total)
+        self._reports.put_nowait(report)
+
+    async def _publish_reports(self) -> None:
+        while True:
+            report = await self._reports.get()
+            await self.bus.publish(keys.errors(self.service), encode(report))
+
+    async def _flush_reports(self) -> None:
+        while not self._reports.empty():
+            await self.bus.publish(keys.errors(self.service), encode(self._reports.get_nowait()))
+
+    async def _until_stopped(self) -> None:
+        await self._stopping.wait()
+        raise _Stop
+
+
+ServiceMain = Callable[[ServiceContext], Awaitable[None]]
+
+
+def run_service(settings: ServiceSettings, service: str, main: ServiceMain) -> int:
+    """Run a service to completion on uvloop and return its exit code."""
+    try:
+        log = Log(service, level=settings.log_level, fmt=settings.log_format)
+    except ValueError as exc:
+        print(f"{service}: bad settings: {exc}")
+        return 2
+    return uvloop.run(_run(settings, service, main, log))
+
+
+async def _run(settings: ServiceSettings, service: str, main: ServiceMain, log: Log) -> int:
+    try:
+        bus = await open_bus(settings.bus_config())
+    except CbdiError as exc:
+        log.error("bus_open_failed", error=str(exc))
+        return 2
+    ctx = ServiceContext(service, bus, log, settings)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, ctx.stop)
+    try:
+        await _supervise(ctx, main)
+    except* CbdiError as group:
+        for exc in group.exceptions:
+            log.error("service_failed", error=str(exc))
+        ctx.exit_code = ctx.exit_code or 1
+    finally:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.remove_signal_handler(sig)
+        await ctx._flush_reports()
+        await bus.close()
+    log.info("stopped", exit_code=ctx.exit_code, **_counter_fields(ctx))
+    return ctx.exit_code
+
+
+async def _supervise(ctx: ServiceContext, main: ServiceMain) -> None:
+    try:
+        async with asyncio.TaskGroup() as tg:
+            ctx._tg = tg
+            tg.create_task(ctx._until_stopped(), name="stop")
+            tg.create_task(ctx._publish_reports(), name="error-reports")
+            await main(ctx)
+            # Let freshly started tasks reach their first await (subscriptions exist
+            # from the call that created them); then tell the world we are ready.
+            await asyncio.sleep(0)
+            await ctx.bus.declare_token(keys.alive(ctx.service))
+            ctx.log.info("ready", alive=keys.alive(ctx.service))
+    except* _Stop:
+        pass
+
+
+def _counter_fields(ctx: ServiceContext) -> dict[str, int]:
+    return {k.replace(".", "_"): v for k, v in sorted(ctx.counters.items())}
+
+
+def settings_fields(settings: Any) -> dict[str, Any]:
+    """Return settings as a plain dict (for the `started` log line)."""
+    return dataclasses.asdict(settings)

@@ -1,0 +1,38 @@
+"""Key layout: per-agent streams, world streams, liveliness, and name validation."""
+
+from __future__ import annotations
+
+import pytest
+import zenoh
+
+from cbdi import keys
+
+
+def test_agent_stream_layout() -> None:
+    assert keys.agent_stream("robot1", "planner", "plans") == "cbdi/robot1/planner/plans"
+    assert keys.agent_ack("robot1") == "cbdi/robot1/executor/ack"
+
+
+def test_wildcards_match_what_they_should() -> None:
+    expr = zenoh.KeyExpr(keys.agent_ack_all())
+    assert expr.intersects(zenoh.KeyExpr(keys.agent_ack("r2")))
+    agent_expr = zenoh.KeyExpr(keys.world_for_agent("r2"))
+    assert agent_expr.intersects(zenoh.KeyExpr(keys.world_percepts("r2")))
+    assert agent_expr.intersects(zenoh.KeyExpr(keys.world_outcomes("r2")))
+    assert not agent_expr.intersects(zenoh.KeyExpr(keys.world_percepts("r3")))
+
+
+def test_liveliness_round_trip() -> None:
+    sid = keys.service_id("executor", "robot1")
+    assert keys.service_of_alive(keys.alive(sid)) == "robot1/executor"
+    assert zenoh.KeyExpr(keys.ALIVE_ALL).intersects(zenoh.KeyExpr(keys.alive("world")))
+
+
+def test_trace_keys_stay_under_root() -> None:
+    assert keys.trace(keys.world_rpc("act")) == "cbdi/trace/world/rpc/act"
+
+
+@pytest.mark.parametrize("bad", ["", "1robot", "a/b", "a*", "world", "x" * 70, "r b"])
+def test_bad_agent_names_are_refused(bad: str) -> None:
+    with pytest.raises(ValueError, match="name"):
+        keys.validate_name(bad)

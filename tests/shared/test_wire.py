@@ -1,0 +1,85 @@
+"""Wire types: round trips, and every kind of bad payload gives a specific WireError."""
+
+from __future__ import annotations
+
+import msgpack
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from cbdi.errors import WireError
+from cbdi.wire import decode, decode_any, encode, schema_of
+from cbdi.wire.common import ErrorReply
+from cbdi.wire.world import ActionRequest, Percepts, Tick
+
+
+def test_round_trip_keeps_every_field() -> None:
+    req = ActionRequest(agent="robot1", action="move", request_id="r-1", target=(2, 3))
+    back = decode(encode(req), ActionRequest)
+    assert back == req
+    assert back.target == (2, 3)
+
+
+def test_schema_names_carry_a_version() -> None:
+    assert schema_of(ActionRequest) == "cbdi.world.ActionRequest/1"
+    raw = msgpack.unpackb(encode(Tick(epoch=1, time=1.0, epoch_duration=1.0, speed=1, lockstep=False)))
+    assert raw["schema"] == "cbdi.world.Tick/1"
+
+
+def test_messages_are_frozen() -> None:
+    req = ActionRequest(agent="a", action="pickup", request_id="1")
+    with pytest.raises(AttributeError):
+        req.agent = "b"  # type: ignore[misc]
+
+
+def test_garbage_bytes_are_rejected_with_schema_and_key() -> None:
+    with pytest.raises(WireError) as err:
+        decode(b"\xc1\xff\x00garbage", ActionRequest, key="cbdi/world/rpc/act")
+    assert err.value.schema == "cbdi.world.ActionRequest/1"
+    assert err.value.key == "cbdi/world/rpc/act"
+    assert "garbage" in err.value.reason or "msgpack" in err.value.reason
+
+
+def test_wrong_field_type_names_the_field() -> None:
+    payload = msgpack.packb({"schema": "cbdi.world.ActionRequest/1", "agent": 7,
+                             "action": "move", "request_id": "x"})
+    with pytest.raises(WireError, match=r"\$\.agent"):
+        decode(payload, ActionRequest)
+
+
+def test_missing_field_is_named() -> None:
+    payload = msgpack.packb({"schema": "cbdi.world.ActionRequest/1", "agent": "a"})
+    with pytest.raises(WireError, match="missing required field"):
+        decode(payload, ActionRequest)
+
+
+def test_other_schema_is_rejected() -> None:
+    payload = encode(ErrorReply(code="x", message="y"))
+    with pytest.raises(WireError, match="wrong schema"):
+        decode(payload, ActionRequest)
+
+
+def test_not_a_map_is_rejected() -> None:
+    with pytest.raises(WireError, match="not a message map"):
+        decode(msgpack.packb([1, 2, 3]), ActionRequest)
+
+
+def test_unknown_fields_are_tolerated() -> None:
+    payload = msgpack.packb({"schema": "cbdi.world.ActionRequest/1", "agent": "a",
+                             "action": "pickup", "request_id": "1", "from_the_future": 1})
+    assert decode(payload, ActionRequest).agent == "a"
+
+
+def test_decode_any_picks_by_schema() -> None:
+    reply = decode_any(encode(ErrorReply(code="c", message="m")), (ActionRequest, ErrorReply))
+    assert isinstance(reply, ErrorReply)
+    with pytest.raises(WireError):
+        decode_any(b"\x00", (ActionRequest, ErrorReply))
+
+
+@given(st.binary(max_size=64))
+def test_random_bytes_never_crash_the_decoder(data: bytes) -> None:
+    try:
+        decode(data, Percepts)
+    except WireError:
+        pass
