@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-
 from cbdi.bus import LogSink, MemoryNetwork, messages, publish, request, serve
 from cbdi.errors import BusClosedError, RequestFailedError, RequestTimeoutError, WireError
 from cbdi.wire.common import ErrorReply

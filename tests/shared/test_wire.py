@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import msgpack
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
-
 from cbdi.errors import WireError
 from cbdi.wire import decode, decode_any, encode, schema_of
 from cbdi.wire.common import ErrorReply
 from cbdi.wire.world import ActionRequest, Percepts, Tick
+from hypothesis import given
+from hypothesis import strategies as st
 
 
 def test_round_trip_keeps_every_field() -> None:

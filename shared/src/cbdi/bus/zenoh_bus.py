@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+from collections import OrderedDict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -23,6 +24,7 @@ from cbdi.errors import BusClosedError, ConfigError, RequestFailedError, Request
 __all__ = ["BusConfig", "ZenohBus", "open_bus", "zenoh_config"]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+_MAX_PUBLISHERS = 1024
 
 
 @dataclass(frozen=True)
@@ -129,6 +131,8 @@ class ZenohBus:
         self.session = session
         self.loop = loop
         self._closeables: set[_ZenohSubscription | _ZenohToken] = set()
+        self._publishers: OrderedDict[tuple[str, bool], Any] = OrderedDict()
+        self._queriers: OrderedDict[tuple[str, float], Any] = OrderedDict()
         self._closed = False
 
     def _check(self) -> None:
@@ -137,8 +141,33 @@ class ZenohBus:
 
     async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
         self._check()
+        publisher = self._publishers.get((key, block))
+        if publisher is None:
+            publisher = self._declare_publisher(key, block)
+        publisher.put(payload)
+
+    def _declare_querier(self, key: str, timeout: float) -> Any:
+        """Declare (and cache) a querier for `key`: repeated requests skip declaration."""
+        if len(self._queriers) >= _MAX_PUBLISHERS:
+            _, oldest = self._queriers.popitem(last=False)
+            with contextlib.suppress(zenoh.ZError):
+                oldest.undeclare()
+        querier = self.session.declare_querier(
+            key, timeout=timeout, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        self._queriers[(key, timeout)] = querier
+        return querier
+
+    def _declare_publisher(self, key: str, block: bool) -> Any:
+        """Declare (and cache) a publisher: repeated puts skip key resolution."""
+        if len(self._publishers) >= _MAX_PUBLISHERS:
+            _, oldest = self._publishers.popitem(last=False)
+            with contextlib.suppress(zenoh.ZError):
+                oldest.undeclare()
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
-        self.session.put(key, payload, congestion_control=cc)
+        publisher = self.session.declare_publisher(key, congestion_control=cc)
+        self._publishers[(key, block)] = publisher
+        return publisher
 
     def subscribe(self, key_expr: str) -> _ZenohSubscription:
         self._check()
@@ -169,13 +198,10 @@ class ZenohBus:
         def on_done() -> None:
             _post(loop, settle, RequestTimeoutError(key, timeout))
 
-        self.session.get(
-            key,
-            Callback(on_reply, on_done, indirect=False),
-            payload=payload,
-            timeout=timeout,
-            congestion_control=zenoh.CongestionControl.BLOCK,
-        )
+        querier = self._queriers.get((key, timeout))
+        if querier is None:
+            querier = self._declare_querier(key, timeout)
+        querier.get(Callback(on_reply, on_done, indirect=False), payload=payload)
         async with asyncio.timeout(timeout + 1.0):
             return await future
 
@@ -238,4 +264,9 @@ class ZenohBus:
         self._closed = True
         for item in list(self._closeables):
             await item.close()
+        for declared in [*self._publishers.values(), *self._queriers.values()]:
+            with contextlib.suppress(zenoh.ZError):
+                declared.undeclare()
+        self._publishers.clear()
+        self._queriers.clear()
         await asyncio.to_thread(self.session.close)

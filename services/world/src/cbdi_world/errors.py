@@ -1,0 +1,35 @@
+"""Errors of the world service; all are `CbdiError`s so the runtime reports them alike."""
+
+from __future__ import annotations
+
+from cbdi.errors import CbdiError
+
+__all__ = ["MapError", "UnknownAgentError", "WorldError"]
+
+
+class WorldError(CbdiError):
+    """Base class of world errors (bad agents list, impossible setup)."""
+
+    code = "world_error"
+
+
+class MapError(WorldError):
+    """Reject a map file, naming the file, the field and the reason."""
+
+    code = "bad_map"
+
+    def __init__(self, path: str, field: str, reason: str) -> None:
+        self.path = path
+        self.field = field
+        self.reason = reason
+        super().__init__(f"{path}: {field}: {reason}")
+
+
+class UnknownAgentError(WorldError):
+    """Refuse a request that names an agent this world does not have."""
+
+    code = "unknown_agent"
+
+    def __init__(self, agent: str) -> None:
+        self.agent = agent
+        super().__init__(f"unknown agent {agent!r}")

@@ -1,0 +1,226 @@
+"""The world service: the pure `World` core behind the bus.
+
+Every epoch it steps the world and publishes the tick, action outcomes, each agent's
+percepts, a snapshot and (periodically) statistics. Requests (`act`, `stats`, `info`) are
+answered at once on the same event loop, so they never race with a step. Pacing comes
+from the injected clock: `speed` simulated seconds per wall second, or as fast as possible
+(speed 0), or lockstep (the next epoch only once every agent acknowledged this one).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from cbdi import keys
+from cbdi.bus import messages, publish, serve
+from cbdi.clock import Clock, WallClock
+from cbdi.errors import CbdiError
+from cbdi.runtime import ServiceContext, ServiceSettings
+from cbdi.runtime.service import ServiceMain
+from cbdi.wire.base import Message
+from cbdi.wire.common import ErrorReply, RunFinished
+from cbdi.wire.world import (
+    ActionRequest,
+    EpochAck,
+    StatsRequest,
+    Tick,
+    WorldInfoRequest,
+)
+from cbdi_world.errors import UnknownAgentError, WorldError
+from cbdi_world.maps import load_map
+from cbdi_world.world import AgentSpec, EpochResult, World
+
+__all__ = ["WorldService", "WorldSettings", "agent_specs", "build_world", "world_main"]
+
+
+@dataclass(frozen=True)
+class WorldSettings(ServiceSettings):
+    """Settings of `cbdi-world` (flags, `CBDI_*` environment or the `[world]` TOML table)."""
+
+    map: str = field(default="", metadata={"help": "map file (TOML)"})
+    agent: tuple[str, ...] = field(
+        default=(), metadata={"help": "agent NAME or NAME:DEPTH, placed on the map's start cells"}
+    )
+    speed: float = field(default=1.0, metadata={"help": "simulated s per wall s; 0 = flat out"})
+    seed: int = field(default=0, metadata={"help": "seed of the random litter"})
+    max_time: float = field(default=0.0, metadata={"help": "end the run at this simulated time"})
+    stop_when_done: bool = field(default=True, metadata={"help": "end when all litter recycled"})
+    lockstep: bool = field(default=False, metadata={"help": "wait for every agent's ack"})
+    wait_agents: float = field(
+        default=30.0, metadata={"help": "seconds to wait for agents before epoch 0 (0: none)"}
+    )
+    ack_timeout: float = field(default=30.0, metadata={"help": "lockstep: seconds per ack wait"})
+    stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
+
+
+def agent_specs(entries: Sequence[str], starts: Sequence[tuple[int, int]], depth: int) -> list[AgentSpec]:
+    """Place agents `NAME[:DEPTH]` on the map's start cells, in order."""
+    specs: list[AgentSpec] = []
+    if len(entries) > len(starts):
+        raise WorldError(f"{len(entries)} agents but the map has only {len(starts)} start cells")
+    for entry, start in zip(entries, starts, strict=False):
+        name, _, d = entry.partition(":")
+        try:
+            keys.validate_name(name)
+            agent_depth = int(d) if d else depth
+        except ValueError as exc:
+            raise WorldError(f"--agent {entry!r}: {exc}") from None
+        specs.append(AgentSpec(name=name, start=start, detection_depth=agent_depth))
+    if len({s.name for s in specs}) != len(specs):
+        raise WorldError("agent names must be unique")
+    return specs
+
+
+class WorldService:
+    """Adapter between the bus and one `World`."""
+
+    def __init__(self, ctx: ServiceContext, world: World, settings: WorldSettings,
+                 clock: Clock | None = None) -> None:
+        self.ctx = ctx
+        self.world = world
+        self.settings = settings
+        self.clock = clock or WallClock()
+        self.agents = [a for a in world.info().agents]
+        self.acked: dict[str, int] = {a: -1 for a in self.agents}
+        self.ack_changed = asyncio.Condition()
+        self.finished: RunFinished | None = None
+
+    def start(self) -> None:
+        """Declare every endpoint now and start the tasks of the service."""
+        ctx, bus = self.ctx, self.ctx.bus
+        ctx.start(serve(bus, keys.world_rpc("act"), ActionRequest, self.on_act, ctx), name="act")
+        ctx.start(serve(bus, keys.world_rpc("stats"), StatsRequest, self.on_stats, ctx),
+                  name="stats")
+        ctx.start(serve(bus, keys.world_rpc("info"), WorldInfoRequest, self.on_info, ctx),
+                  name="info")
+        acks = messages(bus, keys.agent_ack_all(), EpochAck, ctx)
+        ctx.start(self.follow_acks(acks), name="acks")
+        ctx.start(self.run(), name="epochs")
+
+    async def on_act(self, key: str, req: ActionRequest) -> Message:
+        try:
+            reply = self.world.request(req)
+        except UnknownAgentError as exc:
+            self.ctx.counters["unknown_agent"] += 1
+            self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
+            return ErrorReply(code="unknown_agent", message=str(exc))
+        if not reply.accepted:
+            self.ctx.log.info("rejected", agent=req.agent, action=req.action, reason=reply.reason)
+        return reply
+
+    async def on_stats(self, key: str, req: StatsRequest) -> Message:
+        try:
+            return self.world.stats(req.agent)
+        except UnknownAgentError as exc:
+            return ErrorReply(code="unknown_agent", message=str(exc))
+
+    async def on_info(self, key: str, req: WorldInfoRequest) -> Message:
+        return self.world.info()
+
+    async def follow_acks(self, acks: object) -> None:
+        async for _, ack in acks:  # type: ignore[attr-defined]
+            if ack.agent not in self.acked:
+                self.ctx.bad_input(keys.agent_ack(ack.agent), UnknownAgentError(ack.agent))
+                continue
+            async with self.ack_changed:
+                self.acked[ack.agent] = max(self.acked[ack.agent], ack.epoch)
+                self.ack_changed.notify_all()
+
+    async def run(self) -> None:
+        """Publish epoch 0, then step until the run ends; keep serving requests after."""
+        await self.wait_for_agents()
+        await self.publish_epoch(self.world.initial())
+        start = self.clock.now()
+        while self.finished is None:
+            await self.pace(start)
+            result = self.world.step()
+            await self.publish_epoch(result)
+            await self.check_end()
+        self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
+
+    async def wait_for_agents(self) -> None:
+        if self.settings.wait_agents <= 0 or not self.agents:
+            return
+        wanted = {keys.alive(keys.service_id("executor", a)) for a in self.agents}
+        seen: set[str] = set()
+        watch = self.ctx.bus.watch_alive(keys.ALIVE_ALL)
+        try:
+            async with asyncio.timeout(self.settings.wait_agents):
+                async for event in watch:
+                    if event.alive and event.key in wanted:
+                        seen.add(event.key)
+                    if seen >= wanted:
+                        break
+        except TimeoutError:
+            self.ctx.log.warning("agents_missing", missing=",".join(sorted(wanted - seen)))
+        finally:
+            await watch.aclose()  # type: ignore[attr-defined]
+
+    async def pace(self, start: float) -> None:
+        s = self.settings
+        if s.lockstep:
+            await self.wait_acks(self.world.epoch)
+        elif s.speed > 0:
+            due = start + (self.world.epoch + 1) * self.world.info().epoch_duration / s.speed
+            await self.clock.sleep_until(due)
+        else:
+            await asyncio.sleep(0)  # flat out, but let requests in between epochs
+
+    async def wait_acks(self, epoch: int) -> None:
+        try:
+            async with asyncio.timeout(self.settings.ack_timeout), self.ack_changed:
+                await self.ack_changed.wait_for(
+                    lambda: all(e >= epoch for e in self.acked.values())
+                )
+        except TimeoutError:
+            late = [a for a, e in self.acked.items() if e < epoch]
+            self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
+
+    async def publish_epoch(self, result: EpochResult) -> None:
+        bus, w = self.ctx.bus, self.world
+        tick = Tick(epoch=result.epoch, time=result.time, epoch_duration=w.info().epoch_duration,
+                    speed=self.settings.speed, lockstep=self.settings.lockstep)
+        await publish(bus, keys.world_stream("clock"), tick, block=True)
+        for outcome in result.outcomes:
+            await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)
+        for p in result.percepts:
+            await publish(bus, keys.world_percepts(p.agent), p, block=True)
+        await publish(bus, keys.world_stream("snapshot"), result.snapshot)
+        if result.epoch % max(1, self.settings.stats_every) == 0:
+            await publish(bus, keys.world_stream("stats"), w.stats())
+
+    async def check_end(self) -> None:
+        w, s = self.world, self.settings
+        reason = ""
+        if s.stop_when_done and w.done:
+            reason = "done"
+        elif s.max_time > 0 and w.time >= s.max_time:
+            reason = "time_limit"
+        if reason:
+            self.finished = RunFinished(reason=reason, epoch=w.epoch, time=w.time)
+            await publish(self.ctx.bus, keys.world_stream("stats"), w.stats(), block=True)
+            await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)
+
+
+def build_world(settings: WorldSettings) -> World:
+    """Load the map and place the agents; raise a CbdiError/WorldError naming what is wrong."""
+    if not settings.map:
+        raise WorldError("no map given (--map FILE)")
+    world_map = load_map(settings.map)
+    agents = settings.agent or ("robot1",)
+    specs = agent_specs(agents, world_map.agent_starts, world_map.detection_depth)
+    return World(world_map, specs, seed=settings.seed)
+
+
+def world_main(world: World) -> ServiceMain:
+    """Return the service body serving `world` (built before the bus is opened)."""
+
+    async def body(ctx: ServiceContext) -> None:
+        settings: WorldSettings = ctx.settings
+        ctx.log.info("world", map=settings.map, agents=",".join(world.info().agents),
+                     speed=settings.speed, lockstep=settings.lockstep, seed=settings.seed)
+        WorldService(ctx, world, settings).start()
+
+    return body

@@ -1,0 +1,258 @@
+"""The authoritative recycling world: pure, deterministic, stepped one epoch at a time.
+
+`request` answers an action request at once (accepted with its end time, or rejected with
+the reason); `step` advances one epoch: due actions complete (in order of end time, then
+agent name), people advance along their loops, litter may appear, bodies glide, and every
+agent senses the square around it. Same map, agents, seed and requests: the same run.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from cbdi.wire.world import (
+    ActionOutcome, ActionReply, ActionRequest, AgentStats, AgentView, BinView, Cell,
+    LitterView, Percepts, PersonView, WorldInfo, WorldSnapshot, WorldStats,
+)
+
+from cbdi_world.errors import UnknownAgentError, WorldError
+from cbdi_world.maps import WorldMap
+from cbdi_world.physics import Physics
+from cbdi_world.rules import Action, check_request, complete
+
+__all__ = ["AgentSpec", "EpochResult", "World"]
+
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """An agent placed in the world: its name, start cell and detection depth."""
+
+    name: str
+    start: Cell
+    detection_depth: int = 1
+
+
+@dataclass(frozen=True)
+class EpochResult:
+    """What one epoch produced, for the service to publish."""
+
+    epoch: int
+    time: float
+    outcomes: list[ActionOutcome]
+    percepts: list[Percepts]
+    snapshot: WorldSnapshot
+    spawned: list[str]
+
+
+@dataclass
+class AgentState:
+    spec: AgentSpec
+    cell: Cell
+    holding: list[str] = field(default_factory=list)
+    action: Action | None = None
+    stats: dict[str, int] = field(default_factory=dict)
+
+    def count(self, what: str) -> None:
+        self.stats[what] = self.stats.get(what, 0) + 1
+
+
+@dataclass
+class PersonState:
+    name: str
+    path: tuple[Cell, ...]
+    move_step: int
+    index: int = 0
+    countdown: int = 0
+
+    @property
+    def cell(self) -> Cell:
+        return self.path[self.index]
+
+
+class World:
+    """The recycling world of the paper, for any number of agents."""
+
+    def __init__(self, world_map: WorldMap, agents: Sequence[AgentSpec], *, seed: int = 0,
+                 physics_substeps: int = 4) -> None:
+        self.map = world_map
+        self.epoch = 0
+        self.time = 0.0
+        self.rng = random.Random(seed)
+        self.agents: dict[str, AgentState] = {}
+        self.people = [PersonState(p.name, p.path, p.move_step, countdown=p.move_step)
+                       for p in world_map.people]
+        self.occupant: dict[Cell, str] = {p.cell: p.name for p in self.people}
+        self.litter: dict[str, Cell] = {n: c for n, (c, _) in world_map.litter.items()}
+        self.known = {n for n, (_, k) in world_map.litter.items() if k}
+        self.in_hand: set[str] = set()
+        self.recycled: list[str] = []
+        self.spawned = 0
+        self.blocked_static = world_map.walls | set(world_map.bins.values())
+        for spec in agents:
+            self._place(spec)
+        self.physics = Physics(physics_substeps, self._contact)
+        for a in self.agents.values():
+            self.physics.add(a.spec.name, a.cell, robot=True)
+        for p in self.people:
+            self.physics.add(p.name, p.cell, robot=False)
+
+    def _place(self, spec: AgentSpec) -> None:
+        if spec.name in self.agents:
+            raise WorldError(f"agent {spec.name!r} given twice")
+        if not self.map.inside(spec.start) or spec.start in self.blocked_static:
+            raise WorldError(f"agent {spec.name!r} cannot start on {list(spec.start)}")
+        if spec.start in self.occupant:
+            raise WorldError(f"agent {spec.name!r} would start on {self.occupant[spec.start]}")
+        self.agents[spec.name] = AgentState(spec, spec.start)
+        self.occupant[spec.start] = spec.name
+
+    def _contact(self, robot: str, person: str) -> None:
+        self.agents[robot].count("contacts")
+
+    def agent(self, name: str) -> AgentState:
+        try:
+            return self.agents[name]
+        except KeyError:
+            raise UnknownAgentError(name) from None
+
+    @property
+    def done(self) -> bool:
+        """True when no litter lies on the ground, in a hand, or on the way to a bin."""
+        return not self.litter and not self.in_hand
+
+    def request(self, req: ActionRequest) -> ActionReply:
+        """Accept or reject an action at once; an accepted one starts now."""
+        agent = self.agent(req.agent)
+        reason, action = check_request(self, agent, req)
+        if action is None:
+            agent.count("rejected")
+            return ActionReply(request_id=req.request_id, accepted=False, reason=reason)
+        agent.action = action
+        if action.name == "pickup":  # at start: the item leaves the cell (domain semantics)
+            del self.litter[action.item or ""]
+            self.in_hand.add(action.item or "")
+        elif action.name == "recycle":  # at start: the item leaves the hand
+            agent.holding.remove(action.item or "")
+        return ActionReply(request_id=req.request_id, accepted=True,
+                           starts_at=action.starts_at, ends_at=action.ends_at)
+
+    def step(self) -> EpochResult:
+        """Advance one epoch and return what happened."""
+        self.epoch += 1
+        self.time = self.epoch * self.map.epoch_duration
+        outcomes = self._complete_actions()
+        self._move_people()
+        spawned = self._spawn_litter()
+        targets = {a.spec.name: a.cell for a in self.agents.values()}
+        targets.update((p.name, p.cell) for p in self.people)
+        self.physics.glide(targets, self.map.epoch_duration)
+        return self._result(outcomes, spawned)
+
+    def initial(self) -> EpochResult:
+        """Return epoch 0 as an `EpochResult` (nothing happened yet)."""
+        return self._result([], [])
+
+    def _result(self, outcomes: list[ActionOutcome], spawned: list[str]) -> EpochResult:
+        return EpochResult(epoch=self.epoch, time=self.time, outcomes=outcomes,
+                           percepts=[self.percepts(n) for n in self.agents],
+                           snapshot=self.snapshot(), spawned=spawned)
+
+    def _complete_actions(self) -> list[ActionOutcome]:
+        due = [a for a in self.agents.values()
+               if a.action is not None and a.action.ends_at <= self.time + _EPS]
+        due.sort(key=lambda a: (a.action.ends_at if a.action else 0.0, a.spec.name))
+        outcomes = []
+        for agent in due:
+            action = agent.action
+            assert action is not None
+            agent.action = None
+            status, reason = complete(self, agent, action)
+            outcomes.append(ActionOutcome(
+                agent=agent.spec.name, request_id=action.request_id, action=action.name,
+                status=status, reason=reason, epoch=self.epoch, time=self.time,
+                target=action.target, item=action.item))
+        return outcomes
+
+    def _move_people(self) -> None:
+        for p in self.people:
+            if len(p.path) < 2:
+                continue
+            p.countdown -= 1
+            if p.countdown > 0:
+                continue
+            nxt = (p.index + 1) % len(p.path)
+            if p.path[nxt] in self.occupant:
+                continue  # blocked: try again next epoch
+            del self.occupant[p.cell]
+            p.index = nxt
+            self.occupant[p.cell] = p.name
+            p.countdown = p.move_step
+
+    def _spawn_litter(self) -> list[str]:
+        if self.map.spawn_probability <= 0 or self.rng.random() >= self.map.spawn_probability:
+            return []
+        taken = self.blocked_static | set(self.occupant) | set(self.litter.values())
+        free = [(x, y) for y in range(self.map.height) for x in range(self.map.width)
+                if (x, y) not in taken]
+        if not free:
+            return []
+        self.spawned += 1
+        name = f"litter_{self.spawned}"
+        self.litter[name] = self.rng.choice(free)
+        return [name]
+
+    def percepts(self, name: str) -> Percepts:
+        """What agent `name` senses now: the clipped (2d+1)x(2d+1) square around it."""
+        agent = self.agent(name)
+        d = agent.spec.detection_depth
+        (ax, ay), m = agent.cell, self.map
+        free: list[Cell] = []
+        blocked: list[Cell] = []
+        for y in range(max(0, ay - d), min(m.height, ay + d + 1)):
+            for x in range(max(0, ax - d), min(m.width, ax + d + 1)):
+                cell = (x, y)
+                if cell == agent.cell:
+                    continue
+                if cell in self.blocked_static or cell in self.occupant:
+                    blocked.append(cell)
+                else:
+                    free.append(cell)
+        seen = [LitterView(name=n, cell=c, known=n in self.known) for n, c in self.litter.items()
+                if abs(c[0] - ax) <= d and abs(c[1] - ay) <= d]
+        return Percepts(agent=name, epoch=self.epoch, time=self.time, position=agent.cell,
+                        depth=d, free=free, blocked=blocked, litter=seen,
+                        holding=list(agent.holding))
+
+    def snapshot(self) -> WorldSnapshot:
+        """Everything that moves, with the bodies' poses."""
+        pose = self.physics.pose
+        agents = [AgentView(name=n, cell=a.cell, pose=pose(n), holding=list(a.holding),
+                            action=a.action.name if a.action else "")
+                  for n, a in self.agents.items()]
+        people = [PersonView(name=p.name, cell=p.cell, pose=pose(p.name)) for p in self.people]
+        litter = [LitterView(name=n, cell=c, known=n in self.known) for n, c in self.litter.items()]
+        return WorldSnapshot(epoch=self.epoch, time=self.time, agents=agents, people=people,
+                             litter=litter, recycled=list(self.recycled))
+
+    def stats(self, agent: str = "") -> WorldStats:
+        """Per-agent counters (one agent, or all when `agent` is empty) and litter totals."""
+        names = [self.agent(agent).spec.name] if agent else list(self.agents)
+        rows = [AgentStats(agent=n, **self.agents[n].stats) for n in names]
+        return WorldStats(epoch=self.epoch, time=self.time, agents=rows,
+                          litter_on_ground=len(self.litter), litter_held=len(self.in_hand),
+                          litter_recycled=len(self.recycled), litter_spawned=self.spawned,
+                          done=self.done)
+
+    def info(self) -> WorldInfo:
+        """The static part of the world."""
+        m = self.map
+        return WorldInfo(
+            map_name=m.name, width=m.width, height=m.height, walls=sorted(m.walls),
+            bins=[BinView(name=n, cell=c) for n, c in m.bins.items()],
+            agents=list(self.agents),
+            detection_depth={n: a.spec.detection_depth for n, a in self.agents.items()},
+            capacity=m.capacity, epoch_duration=m.epoch_duration, durations=dict(m.durations))
