@@ -41,8 +41,6 @@ def _adjacent(a: Cell, b: Cell) -> bool:
 
 def check_request(world: World, agent: AgentState, req: ActionRequest) -> tuple[str, Action | None]:
     """Return ("", action) if `req` can start now, else (reason, None)."""
-    if agent.action is not None:
-        return f"busy with {agent.action.name} until t={agent.action.ends_at:g}", None
     duration = world.map.durations.get(req.action)
     if duration is None:
         return f"unknown action {req.action!r} (move, pickup, recycle)", None
@@ -50,6 +48,8 @@ def check_request(world: World, agent: AgentState, req: ActionRequest) -> tuple[
     reason, target, item = check(world, agent, req)
     if reason:
         return reason, None
+    if agent.action is not None:  # one action at a time
+        return f"busy with {agent.action.name} until t={agent.action.ends_at:g}", None
     return "", Action(name=req.action, request_id=req.request_id, starts_at=world.time,
                       ends_at=world.time + duration, source=agent.cell, target=target, item=item)
 

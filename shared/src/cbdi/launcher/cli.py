@@ -18,7 +18,7 @@ from cbdi.launcher.scenario import Scenario, find_scenario, load_scenario
 
 __all__ = ["main"]
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE = 0, 1, 2, 3
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -26,7 +26,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="cbdi up",
         description="Run a scenario: a Zenoh router, the world and every agent's services as "
         "separate processes. Exit codes: 0 run ended as asked, 1 a service failed, "
-        "2 bad usage or scenario, 3 the time limit came before all litter was recycled.",
+        "2 bad usage or scenario, 3 the time limit came before all litter was recycled, 130 interrupted (Ctrl-C).",
     )
     p.add_argument("scenario", help="scenario name (domains/recycling/scenarios/NAME.toml) or file")
     p.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
@@ -96,6 +96,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     _report(summary, args.json)
     if summary.ok:
         return EXIT_OK
+    if summary.result == "interrupted":
+        return EXIT_INTERRUPTED
     return EXIT_INCOMPLETE if summary.result == "incomplete" else EXIT_FAILED
 
 

@@ -116,6 +116,13 @@ class ManagedProcess:
         proc = self.proc
         if proc is None or proc.returncode is not None:
             return
+        try:
+            await self._terminate(proc, grace)
+        finally:
+            if proc.returncode is not None:
+                self.exit_codes.append(proc.returncode)
+
+    async def _terminate(self, proc: asyncio.subprocess.Process, grace: float) -> None:
         with contextlib.suppress(ProcessLookupError):
             proc.send_signal(signal.SIGTERM)
         try:

@@ -1,0 +1,107 @@
+"""`cbdi up`: the launcher runs scenarios as processes, restarts crashed services, reports."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+from pathlib import Path
+
+import pytest
+from tests_support import BIN, REPO, wait_for
+
+pytestmark = pytest.mark.e2e
+
+CBDI = str(BIN / "cbdi") if (BIN / "cbdi").exists() else "cbdi"
+
+
+def up(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([CBDI, "up", *args], capture_output=True, text=True,
+                          timeout=timeout, cwd=REPO, stdin=subprocess.DEVNULL)
+
+
+def test_corridor_run_ends_done_with_json_summary() -> None:
+    result = up("corridor", "--json", "--quiet")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "done"
+    robot = summary["stats"]["agents"]["robot1"]
+    assert (robot["moves"], robot["pickups"], robot["recycled"]) == (6, 1, 1)
+    assert summary["restarts"] == {"router": 0, "world": 0, "robot1/executor": 0}
+
+
+def test_several_agents_share_one_world() -> None:
+    result = up("paper-7x7", "--agents", "3", "--speed", "40", "--json", "--quiet")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    agents = summary["stats"]["agents"]
+    assert sorted(agents) == ["robot1", "robot2", "robot3"]
+    assert sum(a["recycled"] for a in agents.values()) == 3
+    assert summary["stats"]["litter_on_ground"] == 0
+
+
+def test_time_limited_run_and_seconds_until() -> None:
+    result = up("paper-7x7", "--until", "5", "--speed", "20", "--json", "--quiet")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "time_limit" and summary["epochs"] == 5
+
+
+def test_unknown_scenario_and_bad_options_exit_2() -> None:
+    result = up("no-such-scenario")
+    assert result.returncode == 2 and "no such scenario" in result.stderr
+    assert "paper-7x7" in result.stderr  # it lists the ones it knows
+    result = up("corridor", "--until", "soon")
+    assert result.returncode == 2 and "--until" in result.stderr
+
+
+def _start_and_kill_agent(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen[str], Path]:
+    log = tmp_path / "up.log"
+    proc = subprocess.Popen([CBDI, "up", "paper-7x7", "--speed", "6", "--json", *extra],
+                            stdout=subprocess.PIPE, stderr=log.open("w"), text=True, cwd=REPO,
+                            stdin=subprocess.DEVNULL)
+    pattern = re.compile(r"started service=robot1/executor pid=(\d+)")
+    wait_for(lambda: pattern.search(log.read_text()) and "event=requested" in log.read_text(),
+             timeout=60, what="the agent to start acting")
+    match = pattern.search(log.read_text())
+    assert match
+    os.kill(int(match.group(1)), signal.SIGKILL)
+    return proc, log
+
+
+def test_killed_service_is_restarted_and_the_run_completes(tmp_path: Path) -> None:
+    proc, log = _start_and_kill_agent(tmp_path)
+    out, _ = proc.communicate(timeout=120)
+    text = log.read_text()
+    assert "restarting service=robot1/executor exit_code=-9 restart=1" in text
+    assert len(re.findall(r"started service=robot1/executor pid=", text)) == 2
+    summary = json.loads(out)
+    assert proc.returncode == 0, text[-3000:]
+    assert summary["result"] == "done" and summary["restarts"]["robot1/executor"] == 1
+    assert summary["stats"]["litter_recycled"] == 3
+
+
+def test_restart_policy_never_fails_the_run(tmp_path: Path) -> None:
+    proc, log = _start_and_kill_agent(tmp_path, "--restart", "never")
+    out, _ = proc.communicate(timeout=60)
+    summary = json.loads(out)
+    assert proc.returncode == 1
+    assert summary["result"] == "failed" and "robot1/executor" in summary["reason"]
+    assert "gave_up service=robot1/executor" in log.read_text()
+
+
+def test_ctrl_c_stops_everything(tmp_path: Path) -> None:
+    log = tmp_path / "up.log"
+    proc = subprocess.Popen([CBDI, "up", "paper-7x7", "--speed", "1", "--json"],
+                            stdout=subprocess.PIPE, stderr=log.open("w"), text=True, cwd=REPO,
+                            stdin=subprocess.DEVNULL)
+    wait_for(lambda: "event=requested" in log.read_text(), timeout=60, what="run to start")
+    pids = [int(p) for p in re.findall(r"pid=(\d+)", log.read_text())]
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=60)
+    assert json.loads(out)["result"] == "interrupted" and proc.returncode == 130
+    for pid in pids:  # no child left behind
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
