@@ -18,9 +18,7 @@ ENV PATH=/opt/venv/bin:$PATH
 COPY shared ./shared
 COPY services ./services
 COPY domains ./domains
-RUN pip install --no-cache-dir --no-deps --no-build-isolation ./shared ./services/world \
- && if [ -f services/planner/src/cbdi_planner/__init__.py ]; then \
-      pip install --no-cache-dir --no-deps --no-build-isolation ./services/planner; fi
+RUN pip install --no-cache-dir --no-deps --no-build-isolation ./shared ./services/world
 
 ENV CBDI_DOMAINS=/opt/cbdi/domains
 # Services connect to the router through CBDI_CONNECT (set in docker-compose.yml).

@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := shared services/world services/planner
+PACKAGES := shared services/world
 PYTEST_ARGS ?=
 
 .PHONY: venv demo test lint bench clean compose-tools
@@ -33,7 +33,7 @@ test: venv compose-tools
 lint: venv
 	$(BIN)/ruff check shared services tests benchmarks
 	$(BIN)/mypy --strict shared/src/cbdi
-	$(BIN)/mypy services/world/src services/planner/src
+	$(BIN)/mypy services/world/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py

@@ -133,15 +133,20 @@ def main() -> None:
     router = _router(endpoint)
     try:
         rows = [
-            ("one-way pub/sub", raw_pubsub(endpoint, args.n),
-             uvloop.run(bus_pubsub(endpoint, args.n))),
+            (
+                "one-way pub/sub",
+                raw_pubsub(endpoint, args.n),
+                uvloop.run(bus_pubsub(endpoint, args.n)),
+            ),
             ("request/reply", raw_rpc(endpoint, args.n), uvloop.run(bus_rpc(endpoint, args.n))),
         ]
     finally:
         router.send_signal(signal.SIGTERM)
         router.wait(10)
-    print(f"bus latency, {args.n} messages each, via a cbdi router on loopback "
-          f"({os.cpu_count()} cores)")
+    print(
+        f"bus latency, {args.n} messages each, via a cbdi router on loopback "
+        f"({os.cpu_count()} cores)"
+    )
     print(f"{'':18}{'raw med us':>12}{'raw p90':>10}{'bus med us':>12}{'bus p90':>10}{'ratio':>8}")
     for name, raw, bus in rows:
         rm, r9 = _stats(raw)

@@ -44,8 +44,9 @@ def core(epochs: int) -> float:
             if a.action is None:
                 x, y = a.cell
                 target = (x, y + 1) if (e // 2) % 2 == 0 else (x, y - 1)
-                w.request(ActionRequest(agent=s.name, action="move", request_id=str(e),
-                                        target=target))
+                w.request(
+                    ActionRequest(agent=s.name, action="move", request_id=str(e), target=target)
+                )
         w.step()
     return epochs / (time.perf_counter() - start)
 
@@ -68,8 +69,9 @@ async def service(epochs: int) -> float:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
-    router = subprocess.Popen([str(BIN / "cbdi"), "router", "--listen", endpoint,
-                               "--log-level", "warning"])
+    router = subprocess.Popen(
+        [str(BIN / "cbdi"), "router", "--listen", endpoint, "--log-level", "warning"]
+    )
     world = None
     try:
         await asyncio.sleep(1.0)
@@ -78,10 +80,25 @@ async def service(epochs: int) -> float:
         await ready.wait()
         await asyncio.sleep(0.3)
         agents = [a for i in range(8) for a in ("--agent", f"robot{i + 1}")]
-        world = subprocess.Popen([str(BIN / "cbdi-world"), "--map", str(MAP), *agents,
-                                  "--speed", "0", "--wait-agents", "0", "--max-time",
-                                  str(epochs), "--no-stop-when-done", "--connect", endpoint,
-                                  "--log-level", "warning"])
+        world = subprocess.Popen(
+            [
+                str(BIN / "cbdi-world"),
+                "--map",
+                str(MAP),
+                *agents,
+                "--speed",
+                "0",
+                "--wait-agents",
+                "0",
+                "--max-time",
+                str(epochs),
+                "--no-stop-when-done",
+                "--connect",
+                endpoint,
+                "--log-level",
+                "warning",
+            ]
+        )
         count, seconds = await follower
         return count / seconds
     finally:

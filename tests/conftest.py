@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
 from tests_support import BIN, Proc, free_port
 
 
@@ -37,4 +38,3 @@ def router(spawn: object) -> Iterator[str]:
         assert time.monotonic() < deadline, "router did not come up"
         time.sleep(0.05)
     yield endpoint
-

@@ -14,8 +14,13 @@ COMPOSE = shutil.which("docker-compose")
 
 def _config(path: Path, *extra: str) -> subprocess.CompletedProcess[str]:
     assert COMPOSE, "docker-compose is missing: `make test` installs it (Debian package)"
-    return subprocess.run([COMPOSE, "-f", str(path), "config", *extra], capture_output=True,
-                          text=True, timeout=60, cwd=path.parent)
+    return subprocess.run(
+        [COMPOSE, "-f", str(path), "config", *extra],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=path.parent,
+    )
 
 
 def test_compose_file_is_valid() -> None:

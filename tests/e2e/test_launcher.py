@@ -10,6 +10,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+
 from tests_support import BIN, REPO, wait_for
 
 pytestmark = pytest.mark.e2e
@@ -18,8 +19,14 @@ CBDI = str(BIN / "cbdi") if (BIN / "cbdi").exists() else "cbdi"
 
 
 def up(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([CBDI, "up", *args], capture_output=True, text=True,
-                          timeout=timeout, cwd=REPO, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [CBDI, "up", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=REPO,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def test_corridor_run_ends_done_with_json_summary() -> None:
@@ -59,12 +66,20 @@ def test_unknown_scenario_and_bad_options_exit_2() -> None:
 
 def _start_and_kill_agent(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen[str], Path]:
     log = tmp_path / "up.log"
-    proc = subprocess.Popen([CBDI, "up", "paper-7x7", "--speed", "6", "--json", *extra],
-                            stdout=subprocess.PIPE, stderr=log.open("w"), text=True, cwd=REPO,
-                            stdin=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [CBDI, "up", "paper-7x7", "--speed", "6", "--json", *extra],
+        stdout=subprocess.PIPE,
+        stderr=log.open("w"),
+        text=True,
+        cwd=REPO,
+        stdin=subprocess.DEVNULL,
+    )
     pattern = re.compile(r"started service=robot1/executor pid=(\d+)")
-    wait_for(lambda: pattern.search(log.read_text()) and "event=requested" in log.read_text(),
-             timeout=60, what="the agent to start acting")
+    wait_for(
+        lambda: pattern.search(log.read_text()) and "event=requested" in log.read_text(),
+        timeout=60,
+        what="the agent to start acting",
+    )
     match = pattern.search(log.read_text())
     assert match
     os.kill(int(match.group(1)), signal.SIGKILL)
@@ -94,9 +109,14 @@ def test_restart_policy_never_fails_the_run(tmp_path: Path) -> None:
 
 def test_ctrl_c_stops_everything(tmp_path: Path) -> None:
     log = tmp_path / "up.log"
-    proc = subprocess.Popen([CBDI, "up", "paper-7x7", "--speed", "1", "--json"],
-                            stdout=subprocess.PIPE, stderr=log.open("w"), text=True, cwd=REPO,
-                            stdin=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [CBDI, "up", "paper-7x7", "--speed", "1", "--json"],
+        stdout=subprocess.PIPE,
+        stderr=log.open("w"),
+        text=True,
+        cwd=REPO,
+        stdin=subprocess.DEVNULL,
+    )
     wait_for(lambda: "event=requested" in log.read_text(), timeout=60, what="run to start")
     pids = [int(p) for p in re.findall(r"pid=(\d+)", log.read_text())]
     proc.send_signal(signal.SIGINT)

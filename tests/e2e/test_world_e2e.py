@@ -10,12 +10,12 @@ import asyncio
 from pathlib import Path
 
 import pytest
-from tests_support import REPO, wait_for
 
 from cbdi import keys
 from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import StatsRequest, WorldInfo, WorldInfoRequest, WorldStats
+from tests_support import REPO, wait_for
 
 pytestmark = pytest.mark.e2e
 
@@ -29,24 +29,44 @@ async def _finished_and_stats(endpoint: str) -> tuple[RunFinished, WorldStats, W
         events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
         info = await request(bus, keys.world_rpc("info"), WorldInfoRequest(), WorldInfo, timeout=5)
         _, finished = await asyncio.wait_for(anext(events), 60)
-        stats = await request(bus, keys.world_rpc("stats"), StatsRequest(agent="robot1"),
-                              WorldStats, timeout=5)
+        stats = await request(
+            bus, keys.world_rpc("stats"), StatsRequest(agent="robot1"), WorldStats, timeout=5
+        )
         return finished, stats, info
     finally:
         await bus.close()
 
 
 @pytest.mark.parametrize("pacing", [["--lockstep"], ["--speed", "25"]])
-async def test_scripted_agent_recycles_one_item(router: str, spawn: object,
-                                                pacing: list[str]) -> None:
+async def test_scripted_agent_recycles_one_item(
+    router: str, spawn: object, pacing: list[str]
+) -> None:
     env = {"CBDI_CONNECT": router}
-    world = spawn("world", "cbdi-world", "--map", CORRIDOR, "--agent", "robot1",  # type: ignore[operator]
-                  "--stop-when-done", *pacing, env=env)
+    world = spawn(
+        "world",
+        "cbdi-world",
+        "--map",
+        CORRIDOR,
+        "--agent",
+        "robot1",  # type: ignore[operator]
+        "--stop-when-done",
+        *pacing,
+        env=env,
+    )
     wait_for(lambda: "event=ready" in world.output(), what="world ready")
     waiter = asyncio.create_task(_finished_and_stats(router))
     await asyncio.sleep(0.5)
-    agent = spawn("agent", "cbdi-scripted-agent", "--agent", "robot1", "--map", CORRIDOR,  # type: ignore[operator]
-                  "--script", PATH, env=env)
+    agent = spawn(
+        "agent",
+        "cbdi-scripted-agent",
+        "--agent",
+        "robot1",
+        "--map",
+        CORRIDOR,  # type: ignore[operator]
+        "--script",
+        PATH,
+        env=env,
+    )
     finished, stats, info = await waiter
     assert finished.reason == "done"
     assert finished.epoch == 12  # 6 moves of 1 + pickup 3 + recycle 3 epochs
@@ -60,11 +80,32 @@ async def test_scripted_agent_recycles_one_item(router: str, spawn: object,
 
 async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -> None:
     env = {"CBDI_CONNECT": router}
-    world = spawn("world", "cbdi-world", "--map", CORRIDOR, "--agent", "robot1",  # type: ignore[operator]
-                  "--lockstep", "--max-time", "6", env=env)
+    world = spawn(
+        "world",
+        "cbdi-world",
+        "--map",
+        CORRIDOR,
+        "--agent",
+        "robot1",  # type: ignore[operator]
+        "--lockstep",
+        "--max-time",
+        "6",
+        env=env,
+    )
     wait_for(lambda: "event=ready" in world.output(), what="world ready")
-    agent = spawn("agent", "cbdi-scripted-agent", "--agent", "robot1", "--map", CORRIDOR,  # type: ignore[operator]
-                  "--script", "move:1,0", "--retries", "2", env=env)
+    agent = spawn(
+        "agent",
+        "cbdi-scripted-agent",
+        "--agent",
+        "robot1",
+        "--map",
+        CORRIDOR,  # type: ignore[operator]
+        "--script",
+        "move:1,0",
+        "--retries",
+        "2",
+        env=env,
+    )
     wait_for(lambda: not agent.alive(), timeout=30, what="agent to give up")
     assert "reason=wall" in agent.output()
     assert agent.popen.returncode == 1

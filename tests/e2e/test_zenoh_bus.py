@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+
 from cbdi.bus import BusConfig, open_bus
 from cbdi.errors import ConfigError, RequestTimeoutError
 from tests_support import free_port

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+
 from cbdi.errors import ConfigError
 from cbdi.runtime import ServiceSettings, load_config
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+
 from cbdi.bus import LogSink, MemoryNetwork, messages, publish, request, serve
 from cbdi.errors import BusClosedError, RequestFailedError, RequestTimeoutError, WireError
 from cbdi.wire.common import ErrorReply
@@ -98,12 +99,22 @@ async def test_typed_serve_answers_garbage_with_error_reply_and_keeps_serving() 
     err = decode(raw, ErrorReply)
     assert err.code == "bad_message" and "ActionRequest" in err.message
     with pytest.raises(RequestFailedError, match="internal"):
-        await request(client, "cbdi/world/rpc/act",
-                      ActionRequest(agent="a", action="explode", request_id="boom"), ActionReply)
-    ok = await request(client, "cbdi/world/rpc/act",
-                       ActionRequest(agent="a", action="move", request_id="r2"), ActionReply)
+        await request(
+            client,
+            "cbdi/world/rpc/act",
+            ActionRequest(agent="a", action="explode", request_id="boom"),
+            ActionReply,
+        )
+    ok = await request(
+        client,
+        "cbdi/world/rpc/act",
+        ActionRequest(agent="a", action="move", request_id="r2"),
+        ActionReply,
+    )
     assert ok.accepted and calls == ["boom", "r2"]
     assert len(sink.errors) == 2
     traced = [s.key for s in net.published if s.key.startswith("cbdi/trace/")]
-    assert "cbdi/trace/world/rpc/act/request" in traced and "cbdi/trace/world/rpc/act/reply" in traced
+    assert (
+        "cbdi/trace/world/rpc/act/request" in traced and "cbdi/trace/world/rpc/act/reply" in traced
+    )
     task.cancel()

@@ -40,28 +40,43 @@ def test_larger_maps_have_room_for_many_agents() -> None:
 BASE = 'name = "t"\ngrid = """\nBA..\n....\n"""\n'
 
 
-@pytest.mark.parametrize(("text", "field", "reason"), [
-    ('name = "t"\ngrid = """\nBA..\n...\n"""\n', "grid row 1", "has 3 cells"),
-    ('name = "t"\ngrid = """\nBA.?\n....\n"""\n', "grid row 0 column 3", "unknown cell"),
-    ('name = "t"\ngrid = """\nB...\n....\n"""\n', "grid", "no agent start"),
-    ('name = "t"\ngrid = """\n.A..\n....\n"""\n', "grid", "no bin"),
-    ('grid = """\nBA..\n"""\n', "name", "missing"),
-    (BASE + "[litter]\nspawn_probability = 2\n", "litter.spawn_probability", "expected 0..1"),
-    (BASE + "[durations]\nfly = 1\n", "durations", "unknown actions"),
-    (BASE + "[agents]\ndetection_depth = -1\n", "agents.detection_depth", "integer >= 0"),
-    (BASE + "[[people]]\nmove_step = 0\npath = [[2, 1]]\n", "people[0].move_step", ">= 1"),
-    (BASE + "[[people]]\nmove_step = 1\npath = [[2, 1], [3, 0]]\n", "people[0].path[1]",
-     "is not next to"),
-    (BASE + "[[people]]\nmove_step = 1\npath = [[2, 1], [9, 1]]\n", "people[0].path[1]",
-     "outside the 4x2 map"),
-    (BASE + "[[people]]\nmove_step = 1\npath = [[0, 0]]\n", "people[0].path[0]", "wall or a bin"),
-    (BASE + "[[people]]\nmove_step = 1\npath = [[1, 1], [2, 1], [3, 1], [3, 0]]\n",
-     "people[0].path", "not closed"),
-    (BASE + "[[people]]\nmove_step = 1\npath = [[1, 0]]\n", "people[0].path[0]",
-     "agent start"),
-    (BASE + "[[people]]\nmove_step = 1\npath = 'x'\n", "people[0].path", "list of [x, y]"),
-    ("grid = = 1", "toml", ""),
-])
+@pytest.mark.parametrize(
+    ("text", "field", "reason"),
+    [
+        ('name = "t"\ngrid = """\nBA..\n...\n"""\n', "grid row 1", "has 3 cells"),
+        ('name = "t"\ngrid = """\nBA.?\n....\n"""\n', "grid row 0 column 3", "unknown cell"),
+        ('name = "t"\ngrid = """\nB...\n....\n"""\n', "grid", "no agent start"),
+        ('name = "t"\ngrid = """\n.A..\n....\n"""\n', "grid", "no bin"),
+        ('grid = """\nBA..\n"""\n', "name", "missing"),
+        (BASE + "[litter]\nspawn_probability = 2\n", "litter.spawn_probability", "expected 0..1"),
+        (BASE + "[durations]\nfly = 1\n", "durations", "unknown actions"),
+        (BASE + "[agents]\ndetection_depth = -1\n", "agents.detection_depth", "integer >= 0"),
+        (BASE + "[[people]]\nmove_step = 0\npath = [[2, 1]]\n", "people[0].move_step", ">= 1"),
+        (
+            BASE + "[[people]]\nmove_step = 1\npath = [[2, 1], [3, 0]]\n",
+            "people[0].path[1]",
+            "is not next to",
+        ),
+        (
+            BASE + "[[people]]\nmove_step = 1\npath = [[2, 1], [9, 1]]\n",
+            "people[0].path[1]",
+            "outside the 4x2 map",
+        ),
+        (
+            BASE + "[[people]]\nmove_step = 1\npath = [[0, 0]]\n",
+            "people[0].path[0]",
+            "wall or a bin",
+        ),
+        (
+            BASE + "[[people]]\nmove_step = 1\npath = [[1, 1], [2, 1], [3, 1], [3, 0]]\n",
+            "people[0].path",
+            "not closed",
+        ),
+        (BASE + "[[people]]\nmove_step = 1\npath = [[1, 0]]\n", "people[0].path[0]", "agent start"),
+        (BASE + "[[people]]\nmove_step = 1\npath = 'x'\n", "people[0].path", "list of [x, y]"),
+        ("grid = = 1", "toml", ""),
+    ],
+)
 def test_map_errors_name_the_field(text: str, field: str, reason: str) -> None:
     with pytest.raises(MapError) as err:
         parse_map(text, "maps/t.toml")

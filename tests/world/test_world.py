@@ -16,10 +16,12 @@ from cbdi_world.world import AgentSpec, World
 MAPS = Path(__file__).resolve().parents[2] / "domains" / "recycling" / "maps"
 
 
-def req(agent: str, action: str, target: tuple[int, int] | None = None,
-        item: str | None = None) -> ActionRequest:
-    return ActionRequest(agent=agent, action=action, request_id=f"{agent}-{action}",
-                         target=target, item=item)
+def req(
+    agent: str, action: str, target: tuple[int, int] | None = None, item: str | None = None
+) -> ActionRequest:
+    return ActionRequest(
+        agent=agent, action=action, request_id=f"{agent}-{action}", target=target, item=item
+    )
 
 
 def corridor() -> World:
@@ -42,14 +44,17 @@ def test_move_takes_one_epoch_and_counts() -> None:
     assert w.agents["r"].cell == (2, 1) and w.stats("r").agents[0].moves == 1
 
 
-@pytest.mark.parametrize(("request_", "reason"), [
-    (req("r", "fly"), "unknown action"),
-    (req("r", "move"), "needs a target"),
-    (req("r", "move", (3, 1)), "not next to"),
-    (req("r", "move", (1, -1)), "outside the map"),
-    (req("r", "pickup"), "no litter in cell"),
-    (req("r", "recycle"), "holding nothing"),
-])
+@pytest.mark.parametrize(
+    ("request_", "reason"),
+    [
+        (req("r", "fly"), "unknown action"),
+        (req("r", "move"), "needs a target"),
+        (req("r", "move", (3, 1)), "not next to"),
+        (req("r", "move", (1, -1)), "outside the map"),
+        (req("r", "pickup"), "no litter in cell"),
+        (req("r", "recycle"), "holding nothing"),
+    ],
+)
 def test_rejections_are_immediate_and_counted(request_: ActionRequest, reason: str) -> None:
     w = corridor()
     reply = w.request(request_)
@@ -110,8 +115,10 @@ def test_capacity_is_enforced() -> None:
 
 
 def test_two_agents_into_one_cell_first_by_name_wins() -> None:
-    w2 = World(parse_map('name = "x"\ngrid = """\nBA.A\n"""\n'),
-               [AgentSpec("zed", (1, 0)), AgentSpec("amy", (3, 0))])
+    w2 = World(
+        parse_map('name = "x"\ngrid = """\nBA.A\n"""\n'),
+        [AgentSpec("zed", (1, 0)), AgentSpec("amy", (3, 0))],
+    )
     w2.request(req("zed", "move", (2, 0)))
     w2.request(req("amy", "move", (2, 0)))
     outcomes = {o.agent: o for o in w2.step().outcomes}
@@ -121,8 +128,10 @@ def test_two_agents_into_one_cell_first_by_name_wins() -> None:
 
 
 def test_people_walk_their_loop_every_move_step_and_wait_when_blocked() -> None:
-    text = ('name = "p"\ngrid = """\nBA...\n.....\n"""\n'
-            "[[people]]\nname = \"p\"\nmove_step = 2\npath = [[2, 0], [3, 0], [3, 1], [2, 1]]\n")
+    text = (
+        'name = "p"\ngrid = """\nBA...\n.....\n"""\n'
+        '[[people]]\nname = "p"\nmove_step = 2\npath = [[2, 0], [3, 0], [3, 1], [2, 1]]\n'
+    )
     w = World(parse_map(text), [AgentSpec("r", (1, 0))])
     cells = []
     for _ in range(8):
@@ -144,8 +153,10 @@ def test_people_walk_their_loop_every_move_step_and_wait_when_blocked() -> None:
 
 
 def test_a_person_blocks_a_move() -> None:
-    text = ('name = "p"\ngrid = """\nBA.\n...\n"""\n'
-            "[[people]]\nname = \"walker\"\nmove_step = 50\npath = [[2, 0], [2, 1]]\n")
+    text = (
+        'name = "p"\ngrid = """\nBA.\n...\n"""\n'
+        '[[people]]\nname = "walker"\nmove_step = 50\npath = [[2, 0], [2, 1]]\n'
+    )
     w = World(parse_map(text), [AgentSpec("r", (1, 0))])
     w.request(req("r", "move", (2, 0)))
     assert run(w, 1) == ["move:failed:blocked by person walker"]
@@ -160,9 +171,14 @@ def test_sensing_square_is_clipped_and_sees_litter_and_others() -> None:
     wide = World(load_map(MAPS / "paper-7x7.toml"), [AgentSpec("r", (3, 2), detection_depth=2)])
     seen = wide.percepts("r")
     assert (4, 1) in map(tuple, seen.blocked) and len(seen.free) + len(seen.blocked) == 24
-    assert {i.name for i in World(load_map(MAPS / "paper-7x7.toml"),
-                                  [AgentSpec("r", (3, 2), detection_depth=4)])
-            .percepts("r").litter} == {"plastic_6_1", "plastic_4_6", "plastic_3_6"}
+    assert {
+        i.name
+        for i in World(
+            load_map(MAPS / "paper-7x7.toml"), [AgentSpec("r", (3, 2), detection_depth=4)]
+        )
+        .percepts("r")
+        .litter
+    } == {"plastic_6_1", "plastic_4_6", "plastic_3_6"}
 
 
 def test_unknown_agent_and_bad_placement() -> None:
@@ -190,8 +206,10 @@ def test_spawning_is_seeded() -> None:
 
 
 def test_bodies_glide_to_cell_centres_and_contacts_are_counted() -> None:
-    text = ('name = "p"\ngrid = """\nBA.\n...\n"""\n'
-            "[[people]]\nname = \"walker\"\nmove_step = 1\npath = [[1, 1], [1, 0]]\n")
+    text = (
+        'name = "p"\ngrid = """\nBA.\n...\n"""\n'
+        '[[people]]\nname = "walker"\nmove_step = 1\npath = [[1, 1], [1, 0]]\n'
+    )
     w = World(parse_map(text), [AgentSpec("r", (1, 0))])
     assert w.snapshot().agents[0].pose == (1.5, 0.5)
     w.request(req("r", "move", (2, 0)))
@@ -212,10 +230,17 @@ def _replay(seed: int, script: list[tuple[str, str, tuple[int, int] | None]]) ->
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.lists(st.tuples(st.sampled_from(["r0", "r1", "r2", "r3"]),
-                          st.sampled_from(["move", "pickup", "recycle"]),
-                          st.sampled_from([(0, 1), (1, 0), (0, -1), (-1, 0)])), max_size=60),
-       st.integers(0, 5))
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["r0", "r1", "r2", "r3"]),
+            st.sampled_from(["move", "pickup", "recycle"]),
+            st.sampled_from([(0, 1), (1, 0), (0, -1), (-1, 0)]),
+        ),
+        max_size=60,
+    ),
+    st.integers(0, 5),
+)
 def test_random_runs_keep_the_world_consistent(moves: list, seed: int) -> None:
     m = load_map(MAPS / "warehouse-15x15.toml")
     w = World(m, [AgentSpec(f"r{i}", c) for i, c in enumerate(m.agent_starts[:4])], seed=seed)

@@ -29,7 +29,10 @@ async def _router(ctx: ServiceContext) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run a Zenoh router until SIGTERM/SIGINT."""
     settings = load_config(
-        RouterSettings, argv, prog="cbdi router", section="router",
+        RouterSettings,
+        argv,
+        prog="cbdi router",
+        section="router",
         description="Run the Zenoh router every cbdi service connects to.",
     )
     return run_service(settings, "router", _router)

@@ -17,9 +17,9 @@ import uvloop
 from cbdi import keys
 from cbdi.bus import LogSink, messages, request
 from cbdi.bus.base import Bus
+from cbdi.bus.zenoh_bus import open_bus
 from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceSettings, load_config
-from cbdi.bus.zenoh_bus import open_bus
 from cbdi.wire.world import WorldInfo, WorldInfoRequest, WorldSnapshot
 
 __all__ = ["follow_text", "main", "render"]
@@ -84,8 +84,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run `cbdi view` until Ctrl-C."""
     import sys
 
-    settings = load_config(ViewSettings, argv, prog="cbdi view", section="view",
-                           description="Show a running world as text.")
+    settings = load_config(
+        ViewSettings,
+        argv,
+        prog="cbdi view",
+        section="view",
+        description="Show a running world as text.",
+    )
 
     async def run() -> None:
         bus = await open_bus(settings.bus_config())

@@ -7,7 +7,6 @@ from collections.abc import Sequence
 
 from cbdi.errors import ConfigError
 from cbdi.runtime import load_config, run_service
-
 from cbdi_world.errors import WorldError
 from cbdi_world.service import WorldSettings, build_world, world_main
 
@@ -18,7 +17,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the world until SIGTERM/SIGINT; exit 2 on a bad map or settings."""
     try:
         settings = load_config(
-            WorldSettings, argv, prog="cbdi-world", section="world",
+            WorldSettings,
+            argv,
+            prog="cbdi-world",
+            section="world",
             description="The shared recycling world: grid, walls, bins, litter, people and robots.",
         )
         world = build_world(settings)

@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 from cbdi.wire.world import Cell
-
 from cbdi_world.errors import MapError
 
 __all__ = ["DEFAULT_DURATIONS", "PersonSpec", "WorldMap", "load_map", "parse_map"]
@@ -82,10 +81,15 @@ def parse_map(text: str, source: str = "<map>") -> WorldMap:
     m = _Reader(source, data)
     width, height, cells = m.grid()
     walls = frozenset(c for c, ch in cells.items() if ch == "#")
-    bins = {f"bin_{x}_{y}": (x, y) for (x, y), ch in sorted(cells.items(), key=_reading) if ch == "B"}
+    bins = {
+        f"bin_{x}_{y}": (x, y) for (x, y), ch in sorted(cells.items(), key=_reading) if ch == "B"
+    }
     starts = tuple(c for c, ch in sorted(cells.items(), key=_reading) if ch == "A")
-    litter = {f"plastic_{x}_{y}": ((x, y), ch == "L")
-              for (x, y), ch in sorted(cells.items(), key=_reading) if ch in "Ll"}
+    litter = {
+        f"plastic_{x}_{y}": ((x, y), ch == "L")
+        for (x, y), ch in sorted(cells.items(), key=_reading)
+        if ch in "Ll"
+    }
     if not starts:
         raise MapError(source, "grid", "no agent start cell (A)")
     if not bins:
@@ -95,10 +99,19 @@ def parse_map(text: str, source: str = "<map>") -> WorldMap:
     m.check_people_apart(people, starts)
     agents = m.table("agents")
     return WorldMap(
-        name=m.string("name", data, "name"), source=source, width=width, height=height,
-        walls=walls, bins=bins, agent_starts=starts, litter=litter, people=people,
-        spawn_probability=m.probability(), epoch_duration=m.positive(data, "epoch_duration", 1.0),
-        durations=m.durations(), detection_depth=m.natural(agents, "agents.detection_depth", 1),
+        name=m.string("name", data, "name"),
+        source=source,
+        width=width,
+        height=height,
+        walls=walls,
+        bins=bins,
+        agent_starts=starts,
+        litter=litter,
+        people=people,
+        spawn_probability=m.probability(),
+        epoch_duration=m.positive(data, "epoch_duration", 1.0),
+        durations=m.durations(),
+        detection_depth=m.natural(agents, "agents.detection_depth", 1),
         capacity=max(1, m.natural(agents, "agents.capacity", 3)),
         description=str(data.get("description", "")),
     )
@@ -170,8 +183,9 @@ class _Reader:
                 raise self.fail(f"grid row {y}", f"has {len(row)} cells, row 0 has {width}")
             for x, ch in enumerate(row):
                 if ch not in _LEGEND:
-                    raise self.fail(f"grid row {y} column {x}", f"unknown cell {ch!r} "
-                                    f"(use . # B A L l)")
+                    raise self.fail(
+                        f"grid row {y} column {x}", f"unknown cell {ch!r} (use . # B A L l)"
+                    )
                 cells[(x, y)] = ch
         return width, len(rows), cells
 
@@ -181,7 +195,9 @@ class _Reader:
             raise self.fail("people", "expected an array of tables ([[people]])")
         return value
 
-    def person(self, i: int, raw: Any, width: int, height: int, blocked: frozenset[Cell] | set[Cell]) -> PersonSpec:
+    def person(
+        self, i: int, raw: Any, width: int, height: int, blocked: frozenset[Cell] | set[Cell]
+    ) -> PersonSpec:
         where = f"people[{i}]"
         if not isinstance(raw, dict):
             raise self.fail(where, "expected a table")
@@ -195,8 +211,11 @@ class _Reader:
         path: list[Cell] = []
         for j, c in enumerate(path_raw):
             here = f"{where}.path[{j}]"
-            if (not isinstance(c, list) or len(c) != 2
-                    or not all(isinstance(v, int) and not isinstance(v, bool) for v in c)):
+            if (
+                not isinstance(c, list)
+                or len(c) != 2
+                or not all(isinstance(v, int) and not isinstance(v, bool) for v in c)
+            ):
                 raise self.fail(here, f"expected [x, y], got {c!r}")
             cell = (c[0], c[1])
             if not (0 <= cell[0] < width and 0 <= cell[1] < height):
@@ -207,8 +226,9 @@ class _Reader:
                 raise self.fail(here, f"{list(cell)} is not next to {list(path[-1])}")
             path.append(cell)
         if len(path) > 1 and not _adjacent(path[-1], path[0]):
-            raise self.fail(f"{where}.path", "the loop is not closed: the last cell must be "
-                            "next to the first")
+            raise self.fail(
+                f"{where}.path", "the loop is not closed: the last cell must be next to the first"
+            )
         return PersonSpec(name=str(name), path=tuple(path), move_step=step)
 
     def check_people_apart(self, people: tuple[PersonSpec, ...], starts: tuple[Cell, ...]) -> None:

@@ -50,11 +50,20 @@ def check_request(world: World, agent: AgentState, req: ActionRequest) -> tuple[
         return reason, None
     if agent.action is not None:  # one action at a time
         return f"busy with {agent.action.name} until t={agent.action.ends_at:g}", None
-    return "", Action(name=req.action, request_id=req.request_id, starts_at=world.time,
-                      ends_at=world.time + duration, source=agent.cell, target=target, item=item)
+    return "", Action(
+        name=req.action,
+        request_id=req.request_id,
+        starts_at=world.time,
+        ends_at=world.time + duration,
+        source=agent.cell,
+        target=target,
+        item=item,
+    )
 
 
-def _check_move(world: World, agent: AgentState, req: ActionRequest) -> tuple[str, Cell | None, None]:
+def _check_move(
+    world: World, agent: AgentState, req: ActionRequest
+) -> tuple[str, Cell | None, None]:
     if req.target is None:
         return "move needs a target cell", None, None
     target = (int(req.target[0]), int(req.target[1]))
@@ -65,7 +74,9 @@ def _check_move(world: World, agent: AgentState, req: ActionRequest) -> tuple[st
     return "", target, None
 
 
-def _check_pickup(world: World, agent: AgentState, req: ActionRequest) -> tuple[str, None, str | None]:
+def _check_pickup(
+    world: World, agent: AgentState, req: ActionRequest
+) -> tuple[str, None, str | None]:
     if len(agent.holding) >= world.map.capacity:
         return f"already holding {world.map.capacity} items (capacity)", None, None
     here = sorted(n for n, c in world.litter.items() if c == agent.cell)
@@ -78,7 +89,9 @@ def _check_pickup(world: World, agent: AgentState, req: ActionRequest) -> tuple[
     return "", None, here[0]
 
 
-def _check_recycle(world: World, agent: AgentState, req: ActionRequest) -> tuple[str, None, str | None]:
+def _check_recycle(
+    world: World, agent: AgentState, req: ActionRequest
+) -> tuple[str, None, str | None]:
     if not agent.holding:
         return "holding nothing to recycle", None, None
     item = req.item if req.item is not None else agent.holding[0]

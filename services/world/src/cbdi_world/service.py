@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from cbdi import keys
 from cbdi.bus import messages, publish, serve
 from cbdi.clock import Clock, WallClock
-from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.base import Message
@@ -55,7 +54,9 @@ class WorldSettings(ServiceSettings):
     stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
 
 
-def agent_specs(entries: Sequence[str], starts: Sequence[tuple[int, int]], depth: int) -> list[AgentSpec]:
+def agent_specs(
+    entries: Sequence[str], starts: Sequence[tuple[int, int]], depth: int
+) -> list[AgentSpec]:
     """Place agents `NAME[:DEPTH]` on the map's start cells, in order."""
     specs: list[AgentSpec] = []
     if len(entries) > len(starts):
@@ -76,8 +77,9 @@ def agent_specs(entries: Sequence[str], starts: Sequence[tuple[int, int]], depth
 class WorldService:
     """Adapter between the bus and one `World`."""
 
-    def __init__(self, ctx: ServiceContext, world: World, settings: WorldSettings,
-                 clock: Clock | None = None) -> None:
+    def __init__(
+        self, ctx: ServiceContext, world: World, settings: WorldSettings, clock: Clock | None = None
+    ) -> None:
         self.ctx = ctx
         self.world = world
         self.settings = settings
@@ -91,10 +93,12 @@ class WorldService:
         """Declare every endpoint now and start the tasks of the service."""
         ctx, bus = self.ctx, self.ctx.bus
         ctx.start(serve(bus, keys.world_rpc("act"), ActionRequest, self.on_act, ctx), name="act")
-        ctx.start(serve(bus, keys.world_rpc("stats"), StatsRequest, self.on_stats, ctx),
-                  name="stats")
-        ctx.start(serve(bus, keys.world_rpc("info"), WorldInfoRequest, self.on_info, ctx),
-                  name="info")
+        ctx.start(
+            serve(bus, keys.world_rpc("stats"), StatsRequest, self.on_stats, ctx), name="stats"
+        )
+        ctx.start(
+            serve(bus, keys.world_rpc("info"), WorldInfoRequest, self.on_info, ctx), name="info"
+        )
         acks = messages(bus, keys.agent_ack_all(), EpochAck, ctx)
         ctx.start(self.follow_acks(acks), name="acks")
         ctx.start(self.run(), name="epochs")
@@ -180,8 +184,13 @@ class WorldService:
 
     async def publish_epoch(self, result: EpochResult) -> None:
         bus, w = self.ctx.bus, self.world
-        tick = Tick(epoch=result.epoch, time=result.time, epoch_duration=w.info().epoch_duration,
-                    speed=self.settings.speed, lockstep=self.settings.lockstep)
+        tick = Tick(
+            epoch=result.epoch,
+            time=result.time,
+            epoch_duration=w.info().epoch_duration,
+            speed=self.settings.speed,
+            lockstep=self.settings.lockstep,
+        )
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
             await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)
@@ -219,8 +228,14 @@ def world_main(world: World) -> ServiceMain:
 
     async def body(ctx: ServiceContext) -> None:
         settings: WorldSettings = ctx.settings
-        ctx.log.info("world", map=settings.map, agents=",".join(world.info().agents),
-                     speed=settings.speed, lockstep=settings.lockstep, seed=settings.seed)
+        ctx.log.info(
+            "world",
+            map=settings.map,
+            agents=",".join(world.info().agents),
+            speed=settings.speed,
+            lockstep=settings.lockstep,
+            seed=settings.seed,
+        )
         WorldService(ctx, world, settings).start()
 
     return body

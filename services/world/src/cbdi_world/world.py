@@ -13,10 +13,20 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from cbdi.wire.world import (
-    ActionOutcome, ActionReply, ActionRequest, AgentStats, AgentView, BinView, Cell,
-    LitterView, Percepts, PersonView, WorldInfo, WorldSnapshot, WorldStats,
+    ActionOutcome,
+    ActionReply,
+    ActionRequest,
+    AgentStats,
+    AgentView,
+    BinView,
+    Cell,
+    LitterView,
+    Percepts,
+    PersonView,
+    WorldInfo,
+    WorldSnapshot,
+    WorldStats,
 )
-
 from cbdi_world.errors import UnknownAgentError, WorldError
 from cbdi_world.maps import WorldMap
 from cbdi_world.physics import Physics
@@ -76,15 +86,23 @@ class PersonState:
 class World:
     """The recycling world of the paper, for any number of agents."""
 
-    def __init__(self, world_map: WorldMap, agents: Sequence[AgentSpec], *, seed: int = 0,
-                 physics_substeps: int = 4) -> None:
+    def __init__(
+        self,
+        world_map: WorldMap,
+        agents: Sequence[AgentSpec],
+        *,
+        seed: int = 0,
+        physics_substeps: int = 4,
+    ) -> None:
         self.map = world_map
         self.epoch = 0
         self.time = 0.0
         self.rng = random.Random(seed)
         self.agents: dict[str, AgentState] = {}
-        self.people = [PersonState(p.name, p.path, p.move_step, countdown=p.move_step)
-                       for p in world_map.people]
+        self.people = [
+            PersonState(p.name, p.path, p.move_step, countdown=p.move_step)
+            for p in world_map.people
+        ]
         self.occupant: dict[Cell, str] = {p.cell: p.name for p in self.people}
         self.litter: dict[str, Cell] = {n: c for n, (c, _) in world_map.litter.items()}
         self.known = {n for n, (_, k) in world_map.litter.items() if k}
@@ -137,8 +155,12 @@ class World:
             self.in_hand.add(action.item or "")
         elif action.name == "recycle":  # at start: the item leaves the hand
             agent.holding.remove(action.item or "")
-        return ActionReply(request_id=req.request_id, accepted=True,
-                           starts_at=action.starts_at, ends_at=action.ends_at)
+        return ActionReply(
+            request_id=req.request_id,
+            accepted=True,
+            starts_at=action.starts_at,
+            ends_at=action.ends_at,
+        )
 
     def step(self) -> EpochResult:
         """Advance one epoch and return what happened."""
@@ -157,13 +179,21 @@ class World:
         return self._result([], [])
 
     def _result(self, outcomes: list[ActionOutcome], spawned: list[str]) -> EpochResult:
-        return EpochResult(epoch=self.epoch, time=self.time, outcomes=outcomes,
-                           percepts=[self.percepts(n) for n in self.agents],
-                           snapshot=self.snapshot(), spawned=spawned)
+        return EpochResult(
+            epoch=self.epoch,
+            time=self.time,
+            outcomes=outcomes,
+            percepts=[self.percepts(n) for n in self.agents],
+            snapshot=self.snapshot(),
+            spawned=spawned,
+        )
 
     def _complete_actions(self) -> list[ActionOutcome]:
-        due = [a for a in self.agents.values()
-               if a.action is not None and a.action.ends_at <= self.time + _EPS]
+        due = [
+            a
+            for a in self.agents.values()
+            if a.action is not None and a.action.ends_at <= self.time + _EPS
+        ]
         due.sort(key=lambda a: (a.action.ends_at if a.action else 0.0, a.spec.name))
         outcomes = []
         for agent in due:
@@ -171,10 +201,19 @@ class World:
             assert action is not None
             agent.action = None
             status, reason = complete(self, agent, action)
-            outcomes.append(ActionOutcome(
-                agent=agent.spec.name, request_id=action.request_id, action=action.name,
-                status=status, reason=reason, epoch=self.epoch, time=self.time,
-                target=action.target, item=action.item))
+            outcomes.append(
+                ActionOutcome(
+                    agent=agent.spec.name,
+                    request_id=action.request_id,
+                    action=action.name,
+                    status=status,
+                    reason=reason,
+                    epoch=self.epoch,
+                    time=self.time,
+                    target=action.target,
+                    item=action.item,
+                )
+            )
         return outcomes
 
     def _move_people(self) -> None:
@@ -196,8 +235,12 @@ class World:
         if self.map.spawn_probability <= 0 or self.rng.random() >= self.map.spawn_probability:
             return []
         taken = self.blocked_static | set(self.occupant) | set(self.litter.values())
-        free = [(x, y) for y in range(self.map.height) for x in range(self.map.width)
-                if (x, y) not in taken]
+        free = [
+            (x, y)
+            for y in range(self.map.height)
+            for x in range(self.map.width)
+            if (x, y) not in taken
+        ]
         if not free:
             return []
         self.spawned += 1
@@ -221,38 +264,74 @@ class World:
                     blocked.append(cell)
                 else:
                     free.append(cell)
-        seen = [LitterView(name=n, cell=c, known=n in self.known) for n, c in self.litter.items()
-                if abs(c[0] - ax) <= d and abs(c[1] - ay) <= d]
-        return Percepts(agent=name, epoch=self.epoch, time=self.time, position=agent.cell,
-                        depth=d, free=free, blocked=blocked, litter=seen,
-                        holding=list(agent.holding))
+        seen = [
+            LitterView(name=n, cell=c, known=n in self.known)
+            for n, c in self.litter.items()
+            if abs(c[0] - ax) <= d and abs(c[1] - ay) <= d
+        ]
+        return Percepts(
+            agent=name,
+            epoch=self.epoch,
+            time=self.time,
+            position=agent.cell,
+            depth=d,
+            free=free,
+            blocked=blocked,
+            litter=seen,
+            holding=list(agent.holding),
+        )
 
     def snapshot(self) -> WorldSnapshot:
         """Everything that moves, with the bodies' poses."""
         pose = self.physics.pose
-        agents = [AgentView(name=n, cell=a.cell, pose=pose(n), holding=list(a.holding),
-                            action=a.action.name if a.action else "")
-                  for n, a in self.agents.items()]
+        agents = [
+            AgentView(
+                name=n,
+                cell=a.cell,
+                pose=pose(n),
+                holding=list(a.holding),
+                action=a.action.name if a.action else "",
+            )
+            for n, a in self.agents.items()
+        ]
         people = [PersonView(name=p.name, cell=p.cell, pose=pose(p.name)) for p in self.people]
         litter = [LitterView(name=n, cell=c, known=n in self.known) for n, c in self.litter.items()]
-        return WorldSnapshot(epoch=self.epoch, time=self.time, agents=agents, people=people,
-                             litter=litter, recycled=list(self.recycled))
+        return WorldSnapshot(
+            epoch=self.epoch,
+            time=self.time,
+            agents=agents,
+            people=people,
+            litter=litter,
+            recycled=list(self.recycled),
+        )
 
     def stats(self, agent: str = "") -> WorldStats:
         """Per-agent counters (one agent, or all when `agent` is empty) and litter totals."""
         names = [self.agent(agent).spec.name] if agent else list(self.agents)
         rows = [AgentStats(agent=n, **self.agents[n].stats) for n in names]
-        return WorldStats(epoch=self.epoch, time=self.time, agents=rows,
-                          litter_on_ground=len(self.litter), litter_held=len(self.in_hand),
-                          litter_recycled=len(self.recycled), litter_spawned=self.spawned,
-                          done=self.done)
+        return WorldStats(
+            epoch=self.epoch,
+            time=self.time,
+            agents=rows,
+            litter_on_ground=len(self.litter),
+            litter_held=len(self.in_hand),
+            litter_recycled=len(self.recycled),
+            litter_spawned=self.spawned,
+            done=self.done,
+        )
 
     def info(self) -> WorldInfo:
         """The static part of the world."""
         m = self.map
         return WorldInfo(
-            map_name=m.name, width=m.width, height=m.height, walls=sorted(m.walls),
+            map_name=m.name,
+            width=m.width,
+            height=m.height,
+            walls=sorted(m.walls),
             bins=[BinView(name=n, cell=c) for n, c in m.bins.items()],
             agents=list(self.agents),
             detection_depth={n: a.spec.detection_depth for n, a in self.agents.items()},
-            capacity=m.capacity, epoch_duration=m.epoch_duration, durations=dict(m.durations))
+            capacity=m.capacity,
+            epoch_duration=m.epoch_duration,
+            durations=dict(m.durations),
+        )

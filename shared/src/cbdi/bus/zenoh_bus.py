@@ -222,7 +222,7 @@ class ZenohBus:
                 await self._answer(query, handler)
         finally:
             with contextlib.suppress(zenoh.ZError):
-                queryable.undeclare()
+                queryable.undeclare()  # type: ignore[no-untyped-call]
 
     async def _answer(self, query: zenoh.Query, handler: Handler) -> None:
         key = str(query.key_expr)
@@ -233,7 +233,7 @@ class ZenohBus:
         except zenoh.ZError:
             pass  # the requester went away; nothing to answer
         finally:
-            query.drop()
+            query.drop()  # type: ignore[no-untyped-call]
 
     async def declare_token(self, key: str) -> _ZenohToken:
         self._check()
@@ -256,7 +256,7 @@ class ZenohBus:
                 yield await queue.get()
         finally:
             with contextlib.suppress(zenoh.ZError):
-                sub.undeclare()
+                sub.undeclare()  # type: ignore[no-untyped-call]
 
     async def close(self) -> None:
         if self._closed:

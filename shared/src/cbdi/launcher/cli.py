@@ -26,21 +26,36 @@ def _parser() -> argparse.ArgumentParser:
         prog="cbdi up",
         description="Run a scenario: a Zenoh router, the world and every agent's services as "
         "separate processes. Exit codes: 0 run ended as asked, 1 a service failed, "
-        "2 bad usage or scenario, 3 the time limit came before all litter was recycled, 130 interrupted (Ctrl-C).",
+        "2 bad usage or scenario, 3 the time limit came before all litter was recycled, "
+        "130 interrupted (Ctrl-C).",
     )
-    p.add_argument("scenario", help="scenario name (domains/recycling/scenarios/NAME.toml) or file")
+    p.add_argument(
+        "scenario", help="scenario name (domains/recycling/scenarios/NAME.toml) or a file"
+    )
     p.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
     p.add_argument("--speed", type=float, help="simulated seconds per wall second")
     p.add_argument("--seed", type=int, help="seed of the world's random generator")
     p.add_argument("--until", help="'done' (all litter recycled) or simulated SECONDS")
     p.add_argument("--max-time", type=float, help="simulated seconds before a 'done' run gives up")
-    p.add_argument("--lockstep", action=argparse.BooleanOptionalAction, default=None,
-                   help="advance an epoch only once every agent acknowledged the last one")
+    p.add_argument(
+        "--lockstep",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="advance an epoch only once every agent acknowledged the last one",
+    )
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout at the end")
-    p.add_argument("--view", choices=("none", "text"), default="none",
-                   help="show the world every epoch (text: a character grid)")
-    p.add_argument("--restart", choices=RESTART_POLICIES, default="on-failure",
-                   help="restart policy of crashed services")
+    p.add_argument(
+        "--view",
+        choices=("none", "text"),
+        default="none",
+        help="show the world every epoch (text: a character grid)",
+    )
+    p.add_argument(
+        "--restart",
+        choices=RESTART_POLICIES,
+        default="on-failure",
+        help="restart policy of crashed services",
+    )
     p.add_argument("--max-restarts", type=int, default=3, help="restarts per service at most")
     p.add_argument("--port", type=int, default=0, help="router port (default: a free one)")
     p.add_argument("--startup-timeout", type=float, default=30.0, help="seconds to become alive")
@@ -89,8 +104,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"cbdi up: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    opts = LaunchOptions(restart=policy, port=args.port, startup_timeout=args.startup_timeout,
-                         wall_timeout=args.timeout, view=args.view, quiet=args.quiet)
+    opts = LaunchOptions(
+        restart=policy,
+        port=args.port,
+        startup_timeout=args.startup_timeout,
+        wall_timeout=args.timeout,
+        view=args.view,
+        quiet=args.quiet,
+    )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]
     _report(summary, args.json)

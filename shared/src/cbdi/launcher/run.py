@@ -22,7 +22,13 @@ from cbdi import keys
 from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
 from cbdi.bus.base import Bus
 from cbdi.errors import CbdiError
-from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy, argv_of, console_script
+from cbdi.launcher.process import (
+    ManagedProcess,
+    ProcessSpec,
+    RestartPolicy,
+    argv_of,
+    console_script,
+)
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import StatsRequest, WorldStats
@@ -82,9 +88,14 @@ def _specs(scenario: Scenario, endpoint: str) -> list[ProcessSpec]:
         depth = f":{agent.detection_depth}" if agent.detection_depth is not None else ""
         world_args += ["--agent", f"{agent.name}{depth}"]
     specs = [
-        ProcessSpec("router", argv_of(console_script("cbdi", "cbdi.cli"), "router",
-                                      "--listen", endpoint), {}),
-        ProcessSpec("world", argv_of(console_script("cbdi-world", "cbdi_world.cli"), world_args), env),
+        ProcessSpec(
+            "router",
+            argv_of(console_script("cbdi", "cbdi.cli"), "router", "--listen", endpoint),
+            {},
+        ),
+        ProcessSpec(
+            "world", argv_of(console_script("cbdi-world", "cbdi_world.cli"), world_args), env
+        ),
     ]
     for agent in scenario.agents:
         for component in AGENT_KINDS[agent.kind]:
@@ -96,8 +107,13 @@ def _agent_spec(
     name: str, kind: str, component: str, scenario: Scenario, env: dict[str, str]
 ) -> ProcessSpec:
     if kind == "scripted":
-        argv = argv_of(console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli"),
-                       "--agent", name, "--map", str(scenario.map_path))
+        argv = argv_of(
+            console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli"),
+            "--agent",
+            name,
+            "--map",
+            str(scenario.map_path),
+        )
         return ProcessSpec(keys.service_id(component, name), argv, env)
     raise CbdiError(f"agent kind {kind!r} has no services")
 
@@ -121,7 +137,9 @@ class _Liveliness:
             await self.changed.wait_for(lambda: all(s in self.alive for s in services))
 
 
-async def launch(scenario: Scenario, opts: LaunchOptions, say: Callable[[str, str], None]) -> RunSummary:
+async def launch(
+    scenario: Scenario, opts: LaunchOptions, say: Callable[[str, str], None]
+) -> RunSummary:
     """Run `scenario` to its end and return the summary; never leaves a child behind."""
     summary = RunSummary(scenario=scenario.name)
     endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
@@ -157,8 +175,11 @@ class _Done(Exception):
 
 
 async def _start_all(
-    procs: list[ManagedProcess], endpoint: str, opts: LaunchOptions,
-    tg: asyncio.TaskGroup, summary: RunSummary,
+    procs: list[ManagedProcess],
+    endpoint: str,
+    opts: LaunchOptions,
+    tg: asyncio.TaskGroup,
+    summary: RunSummary,
 ) -> Bus:
     summary.result = "starting"
     router, rest = procs[0], procs[1:]
@@ -183,12 +204,19 @@ async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: Laun
         await live.wait_for(names, opts.startup_timeout)
     except TimeoutError:
         missing = [n for n in names if n not in live.alive]
-        raise CbdiError(f"not alive after {opts.startup_timeout:.0f} s: {', '.join(missing)}") from None
+        raise CbdiError(
+            f"not alive after {opts.startup_timeout:.0f} s: {', '.join(missing)}"
+        ) from None
 
 
 async def _await_end(
-    bus: Bus, procs: list[ManagedProcess], scenario: Scenario, opts: LaunchOptions,
-    tg: asyncio.TaskGroup, summary: RunSummary, say: Callable[[str, str], None],
+    bus: Bus,
+    procs: list[ManagedProcess],
+    scenario: Scenario,
+    opts: LaunchOptions,
+    tg: asyncio.TaskGroup,
+    summary: RunSummary,
+    say: Callable[[str, str], None],
 ) -> None:
     ended: asyncio.Future[str] = asyncio.get_running_loop().create_future()
 
@@ -256,5 +284,7 @@ async def _collect_stats(bus: Bus, summary: RunSummary) -> None:
 
 
 def _agent_dict(a: Any) -> dict[str, int]:
-    return {k: getattr(a, k) for k in ("moves", "pickups", "recycled", "blocked", "failed",
-                                       "rejected", "contacts")}
+    return {
+        k: getattr(a, k)
+        for k in ("moves", "pickups", "recycled", "blocked", "failed", "rejected", "contacts")
+    }

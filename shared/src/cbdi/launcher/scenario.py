@@ -151,7 +151,9 @@ def _agent(raw: Any, index: int, where: str) -> AgentEntry:
         raise ConfigError(where, f"{field}.name", str(exc)) from None
     kind = raw.get("kind", "scripted")
     if kind not in AGENT_KINDS:
-        raise ConfigError(where, f"{field}.kind", f"unknown kind {kind!r} (known: {sorted(AGENT_KINDS)})")
+        raise ConfigError(
+            where, f"{field}.kind", f"unknown kind {kind!r} (known: {sorted(AGENT_KINDS)})"
+        )
     depth = raw.get("detection_depth")
     if depth is not None and (not isinstance(depth, int) or depth < 0):
         raise ConfigError(where, f"{field}.detection_depth", "expected an integer >= 0")

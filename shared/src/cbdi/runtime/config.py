@@ -51,12 +51,18 @@ def _parser(cls: type[Any], prog: str, description: str) -> argparse.ArgumentPar
             help_text = f"{help_text} (default: {default})".strip()
         if _is_bool(tp):
             parser.add_argument(
-                _flag(f.name), dest=f.name, action=argparse.BooleanOptionalAction,
-                default=None, help=help_text,
+                _flag(f.name),
+                dest=f.name,
+                action=argparse.BooleanOptionalAction,
+                default=None,
+                help=help_text,
             )
         elif _origin_is_tuple(tp):
             parser.add_argument(
-                _flag(f.name), dest=f.name, action="append", default=None,
+                _flag(f.name),
+                dest=f.name,
+                action="append",
+                default=None,
                 help=help_text + " (repeatable)",
             )
         else:
@@ -118,7 +124,9 @@ def load_config(
     for source, values in layers:
         for key, value in values.items():
             if key not in known:
-                raise ConfigError(source, key, f"unknown setting (known: {', '.join(sorted(known))})")
+                raise ConfigError(
+                    source, key, f"unknown setting (known: {', '.join(sorted(known))})"
+                )
             merged[key] = value
             sources[key] = source
     return _convert(cls, merged, sources)
@@ -134,4 +142,3 @@ def _convert(cls: type[T], merged: dict[str, Any], sources: dict[str, str]) -> T
         raise ConfigError(sources.get(field, "defaults"), field, text) from None
     except (TypeError, ValueError) as exc:  # a dataclass __post_init__ may validate too
         raise ConfigError("settings", "?", str(exc)) from None
-

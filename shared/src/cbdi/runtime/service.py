@@ -141,8 +141,8 @@ async def _run(settings: ServiceSettings, service: str, main: ServiceMain, log: 
     try:
         await _supervise(ctx, main)
     except* CbdiError as group:
-        for exc in group.exceptions:
-            log.error("service_failed", error=str(exc))
+        for err in group.exceptions:
+            log.error("service_failed", error=str(err))
         ctx.exit_code = ctx.exit_code or 1
     finally:
         for sig in (signal.SIGTERM, signal.SIGINT):

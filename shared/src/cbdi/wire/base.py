@@ -56,7 +56,9 @@ def decode(payload: bytes, cls: type[M], key: str | None = None) -> M:
         raise WireError(schema_of(cls), _explain(exc, payload), key) from None
 
 
-def decode_any(payload: bytes, classes: tuple[type[Message], ...], key: str | None = None) -> Message:
+def decode_any(
+    payload: bytes, classes: tuple[type[Message], ...], key: str | None = None
+) -> Message:
     """Decode `payload` as one of several message classes, chosen by its `schema` tag."""
     union_key = classes
     decoder = _union_decoders.get(union_key)

@@ -7,7 +7,7 @@ from cbdi.wire.base import Message
 __all__ = ["ErrorReply", "ErrorReport", "RunFinished"]
 
 
-class ErrorReply(Message, tag="cbdi.ErrorReply/1"):
+class ErrorReply(Message, frozen=True, tag="cbdi.ErrorReply/1"):
     """Answer a request that could not be served; `code` is machine-readable.
 
     Codes in use: `bad_message` (undecodable payload), `unknown_agent`, `internal`.
@@ -17,7 +17,7 @@ class ErrorReply(Message, tag="cbdi.ErrorReply/1"):
     message: str
 
 
-class ErrorReport(Message, tag="cbdi.ErrorReport/1"):
+class ErrorReport(Message, frozen=True, tag="cbdi.ErrorReport/1"):
     """Report bad input a service received and survived, on its error stream."""
 
     service: str
@@ -27,7 +27,7 @@ class ErrorReport(Message, tag="cbdi.ErrorReport/1"):
     count: int
 
 
-class RunFinished(Message, tag="cbdi.RunFinished/1"):
+class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     """Announce that a run ended: `reason` is `done` (all litter recycled) or `time_limit`."""
 
     reason: str

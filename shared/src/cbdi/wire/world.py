@@ -35,7 +35,7 @@ Pose = tuple[float, float]
 ACTIONS = ("move", "pickup", "recycle")
 
 
-class Tick(Message, tag="cbdi.world.Tick/1"):
+class Tick(Message, frozen=True, tag="cbdi.world.Tick/1"):
     """Publish the world's clock once per epoch: the simulated clock follows this."""
 
     epoch: int
@@ -45,7 +45,7 @@ class Tick(Message, tag="cbdi.world.Tick/1"):
     lockstep: bool
 
 
-class ActionRequest(Message, tag="cbdi.world.ActionRequest/1"):
+class ActionRequest(Message, frozen=True, tag="cbdi.world.ActionRequest/1"):
     """Ask the world to start an action for `agent`.
 
     `move` needs `target` (a 4-adjacent cell); `pickup` takes the litter in the agent's cell
@@ -60,7 +60,7 @@ class ActionRequest(Message, tag="cbdi.world.ActionRequest/1"):
     item: str | None = None
 
 
-class ActionReply(Message, tag="cbdi.world.ActionReply/1"):
+class ActionReply(Message, frozen=True, tag="cbdi.world.ActionReply/1"):
     """Answer an `ActionRequest` at once: accepted (with when it ends) or rejected and why."""
 
     request_id: str
@@ -70,7 +70,7 @@ class ActionReply(Message, tag="cbdi.world.ActionReply/1"):
     ends_at: float = 0.0
 
 
-class ActionOutcome(Message, tag="cbdi.world.ActionOutcome/1"):
+class ActionOutcome(Message, frozen=True, tag="cbdi.world.ActionOutcome/1"):
     """Report how an accepted action ended: `succeeded` or `failed` with a reason."""
 
     agent: str
@@ -84,7 +84,7 @@ class ActionOutcome(Message, tag="cbdi.world.ActionOutcome/1"):
     item: str | None = None
 
 
-class LitterView(Message, tag="cbdi.world.LitterView/1"):
+class LitterView(Message, frozen=True, tag="cbdi.world.LitterView/1"):
     """One litter item lying on a cell; `known` says whether agents knew it from the start."""
 
     name: str
@@ -92,7 +92,7 @@ class LitterView(Message, tag="cbdi.world.LitterView/1"):
     known: bool = True
 
 
-class Percepts(Message, tag="cbdi.world.Percepts/1"):
+class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     """What one agent senses this epoch in the (2d+1)x(2d+1) square around it.
 
     `free` cells are inside the map and hold no wall, bin, person or agent; `blocked` are
@@ -111,7 +111,7 @@ class Percepts(Message, tag="cbdi.world.Percepts/1"):
     holding: list[str]
 
 
-class AgentView(Message, tag="cbdi.world.AgentView/1"):
+class AgentView(Message, frozen=True, tag="cbdi.world.AgentView/1"):
     """One robot in a snapshot: logical cell, continuous pose, load and current action."""
 
     name: str
@@ -121,7 +121,7 @@ class AgentView(Message, tag="cbdi.world.AgentView/1"):
     action: str = ""
 
 
-class PersonView(Message, tag="cbdi.world.PersonView/1"):
+class PersonView(Message, frozen=True, tag="cbdi.world.PersonView/1"):
     """One person in a snapshot."""
 
     name: str
@@ -129,14 +129,14 @@ class PersonView(Message, tag="cbdi.world.PersonView/1"):
     pose: Pose
 
 
-class BinView(Message, tag="cbdi.world.BinView/1"):
+class BinView(Message, frozen=True, tag="cbdi.world.BinView/1"):
     """One bin."""
 
     name: str
     cell: Cell
 
 
-class WorldSnapshot(Message, tag="cbdi.world.WorldSnapshot/1"):
+class WorldSnapshot(Message, frozen=True, tag="cbdi.world.WorldSnapshot/1"):
     """Everything that moves, published every epoch for viewers and recorders."""
 
     epoch: int
@@ -147,11 +147,11 @@ class WorldSnapshot(Message, tag="cbdi.world.WorldSnapshot/1"):
     recycled: list[str]
 
 
-class WorldInfoRequest(Message, tag="cbdi.world.WorldInfoRequest/1"):
+class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"):
     """Ask for the static part of the world (map geometry)."""
 
 
-class WorldInfo(Message, tag="cbdi.world.WorldInfo/1"):
+class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     """The static part of the world: size, walls, bins, agents and their sensing depth."""
 
     map_name: str
@@ -166,14 +166,14 @@ class WorldInfo(Message, tag="cbdi.world.WorldInfo/1"):
     durations: dict[str, float]
 
 
-class EpochAck(Message, tag="cbdi.world.EpochAck/1"):
+class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
     """Acknowledge an epoch (lockstep): the agent has handled everything up to `epoch`."""
 
     agent: str
     epoch: int
 
 
-class AgentStats(Message, tag="cbdi.world.AgentStats/1"):
+class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
     """Counters for one agent, the paper's metric (moves) first."""
 
     agent: str
@@ -186,13 +186,13 @@ class AgentStats(Message, tag="cbdi.world.AgentStats/1"):
     contacts: int = 0
 
 
-class StatsRequest(Message, tag="cbdi.world.StatsRequest/1"):
+class StatsRequest(Message, frozen=True, tag="cbdi.world.StatsRequest/1"):
     """Ask for statistics, of one agent or (agent empty) of all."""
 
     agent: str = ""
 
 
-class WorldStats(Message, tag="cbdi.world.WorldStats/1"):
+class WorldStats(Message, frozen=True, tag="cbdi.world.WorldStats/1"):
     """Per-agent counters and the litter totals at `epoch`."""
 
     epoch: int

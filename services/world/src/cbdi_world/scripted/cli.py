@@ -19,7 +19,6 @@ from cbdi.runtime import ServiceContext, ServiceSettings, load_config, run_servi
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.base import decode_any
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, EpochAck, Percepts
-
 from cbdi_world.errors import WorldError
 from cbdi_world.maps import WorldMap, load_map
 from cbdi_world.scripted.policy import Beliefs, Step, greedy_step, parse_script
@@ -42,8 +41,14 @@ class ScriptedSettings(ServiceSettings):
 class ScriptedAgent:
     """Turn percepts into action requests, one action at a time."""
 
-    def __init__(self, ctx: ServiceContext, name: str, beliefs: Beliefs,
-                 script: list[Step] | None, retries: int) -> None:
+    def __init__(
+        self,
+        ctx: ServiceContext,
+        name: str,
+        beliefs: Beliefs,
+        script: list[Step] | None,
+        retries: int,
+    ) -> None:
         self.ctx, self.name, self.beliefs = ctx, name, beliefs
         self.script, self.retries, self.tries = script, retries, 0
         self.busy = False
@@ -63,8 +68,13 @@ class ScriptedAgent:
 
     def on_outcome(self, outcome: ActionOutcome) -> None:
         self.busy = False
-        self.ctx.log.info("outcome", action=outcome.action, status=outcome.status,
-                          reason=outcome.reason, epoch=outcome.epoch)
+        self.ctx.log.info(
+            "outcome",
+            action=outcome.action,
+            status=outcome.status,
+            reason=outcome.reason,
+            epoch=outcome.epoch,
+        )
         if self.script is not None and outcome.status == "succeeded" and self.script:
             self.script.pop(0)
             self.tries = 0
@@ -75,8 +85,12 @@ class ScriptedAgent:
             step = self.choose()
             if step is not None:
                 await self.act(step)
-        await publish(self.ctx.bus, keys.agent_ack(self.name),
-                      EpochAck(agent=self.name, epoch=p.epoch), block=True)
+        await publish(
+            self.ctx.bus,
+            keys.agent_ack(self.name),
+            EpochAck(agent=self.name, epoch=p.epoch),
+            block=True,
+        )
 
     def choose(self) -> Step | None:
         if self.script is None:
@@ -91,28 +105,43 @@ class ScriptedAgent:
         return self.script[0]
 
     async def act(self, step: Step) -> None:
-        req = ActionRequest(agent=self.name, action=step.action, target=step.target,
-                            item=step.item, request_id=f"{self.name}-{next(self.ids)}")
+        req = ActionRequest(
+            agent=self.name,
+            action=step.action,
+            target=step.target,
+            item=step.item,
+            request_id=f"{self.name}-{next(self.ids)}",
+        )
         try:
             reply = await request(self.ctx.bus, keys.world_rpc("act"), req, ActionReply)
         except CbdiError as exc:
             self.ctx.log.warning("request_failed", action=step.action, error=str(exc))
             return
         self.busy = reply.accepted
-        self.ctx.log.info("requested", action=step.action, target=step.target, item=step.item,
-                          accepted=reply.accepted, reason=reply.reason)
+        self.ctx.log.info(
+            "requested",
+            action=step.action,
+            target=step.target,
+            item=step.item,
+            accepted=reply.accepted,
+            reason=reply.reason,
+        )
 
 
 def _beliefs(world_map: WorldMap) -> Beliefs:
     return Beliefs(
-        width=world_map.width, height=world_map.height,
-        walls=frozenset(world_map.walls), bins=frozenset(world_map.bins.values()),
+        width=world_map.width,
+        height=world_map.height,
+        walls=frozenset(world_map.walls),
+        bins=frozenset(world_map.bins.values()),
         capacity=world_map.capacity,
         litter={name: cell for name, (cell, known) in world_map.litter.items() if known},
     )
 
 
-def scripted_main(settings: ScriptedSettings, beliefs: Beliefs, script: list[Step] | None) -> ServiceMain:
+def scripted_main(
+    settings: ScriptedSettings, beliefs: Beliefs, script: list[Step] | None
+) -> ServiceMain:
     """Return the service body of one scripted agent."""
 
     async def body(ctx: ServiceContext) -> None:
@@ -126,8 +155,13 @@ def scripted_main(settings: ScriptedSettings, beliefs: Beliefs, script: list[Ste
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one scripted agent until stopped."""
     try:
-        settings = load_config(ScriptedSettings, argv, prog="cbdi-scripted-agent",
-                               section="scripted", description=__doc__ or "")
+        settings = load_config(
+            ScriptedSettings,
+            argv,
+            prog="cbdi-scripted-agent",
+            section="scripted",
+            description=__doc__ or "",
+        )
         keys.validate_name(settings.agent)
         beliefs = _beliefs(load_map(settings.map))
         script = parse_script(settings.script) if settings.script else None

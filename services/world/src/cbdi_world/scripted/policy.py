@@ -45,21 +45,26 @@ class Beliefs:
 
     def revise(self, p: Percepts) -> None:
         """Revise beliefs with this epoch's percepts (the square around the agent)."""
-        self.position = tuple(p.position)  # type: ignore[assignment]
+        self.position = p.position
         self.holding = tuple(p.holding)
-        square = {tuple(c) for c in p.free} | {tuple(c) for c in p.blocked} | {self.position}
-        self.sensed |= square  # type: ignore[arg-type]
-        seen = {item.name: tuple(item.cell) for item in p.litter}
+        square = {*p.free, *p.blocked, p.position}
+        self.sensed |= square
+        seen = {item.name: item.cell for item in p.litter}
         for name, cell in list(self.litter.items()):
             if cell in square and name not in seen:
                 del self.litter[name]
-        self.litter.update(seen)  # type: ignore[arg-type]
-        self.blocked = {tuple(c) for c in p.blocked} - self.walls - self.bins  # type: ignore[misc]
+        self.litter.update(seen)
+        self.blocked = set(p.blocked) - self.walls - self.bins
 
     def passable(self, cell: Cell) -> bool:
         x, y = cell
-        return (0 <= x < self.width and 0 <= y < self.height and cell not in self.walls
-                and cell not in self.bins and cell not in self.blocked)
+        return (
+            0 <= x < self.width
+            and 0 <= y < self.height
+            and cell not in self.walls
+            and cell not in self.bins
+            and cell not in self.blocked
+        )
 
     def next_to_bin(self, cell: Cell) -> bool:
         return any((cell[0] + dx, cell[1] + dy) in self.bins for dx, dy in _DIRS)
@@ -106,8 +111,15 @@ def greedy_step(b: Beliefs) -> Step | None:
             return Step("recycle", item=b.holding[0])
         hop = next_hop(b, _bin_sides(b))
         return Step("move", target=hop) if hop else None
-    unknown = [(x, y) for x in range(b.width) for y in range(b.height)
-               if (x, y) not in b.sensed and (x, y) not in b.walls and (x, y) not in b.bins]
+    unknown = [
+        (x, y)
+        for x in range(b.width)
+        for y in range(b.height)
+        if (x, y) not in b.sensed
+        and (x, y) not in b.walls
+        and (x, y) not in b.bins
+        and (x, y) != b.position
+    ]
     hop = next_hop(b, unknown)
     return Step("move", target=hop) if hop else None
 
