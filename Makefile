@@ -25,7 +25,7 @@ compose-tools:
 	  || echo "warning: could not install docker-compose; the compose test will fail"; }
 
 demo: venv
-	$(BIN)/cbdi up paper-7x7 --view text --speed 8 --until done
+	$(BIN)/cbdi up paper-7x7 --view text --quiet --until done
 
 test: venv compose-tools
 	$(BIN)/python -m pytest $(PYTEST_ARGS)

@@ -6,7 +6,10 @@ import asyncio
 
 import pytest
 
-from cbdi.clock import ManualClock, SimClock
+from cbdi import keys
+from cbdi.bus import LogSink, MemoryNetwork, publish
+from cbdi.clock import ManualClock, SimClock, follow_world_clock
+from cbdi.wire.world import Tick
 
 
 async def test_manual_clock_wakes_sleepers_in_time_order() -> None:
@@ -55,3 +58,22 @@ async def test_sim_clock_follows_ticks_and_ignores_stale_ones() -> None:
     assert clock.now() == 1.0 and clock.epoch == 1
     clock.on_tick(2, 2.0)
     await asyncio.wait_for(waiter, 0.5)
+
+
+async def test_sim_clock_follows_the_world_over_the_bus() -> None:
+    net = MemoryNetwork()
+    world, agent = net.bus(), net.bus()
+    clock = SimClock()
+    sink = LogSink()
+    follower = asyncio.create_task(follow_world_clock(agent, clock, sink))
+    await asyncio.sleep(0)
+    woke = asyncio.create_task(clock.sleep_until(2.0))
+    await asyncio.sleep(0)
+    for epoch in range(3):
+        tick = Tick(epoch=epoch, time=float(epoch), epoch_duration=1.0, speed=1.0, lockstep=False)
+        await publish(world, keys.world_stream("clock"), tick)
+        await world.publish(keys.world_stream("clock"), b"garbage")
+        await asyncio.sleep(0)
+    await asyncio.wait_for(woke, 1)
+    assert clock.now() == 2.0 and clock.epoch == 2 and len(sink.errors) == 3
+    follower.cancel()

@@ -14,7 +14,12 @@ import itertools
 import time
 from typing import Protocol
 
-__all__ = ["Clock", "ManualClock", "SimClock", "WallClock"]
+from cbdi import keys
+from cbdi.bus.base import Bus
+from cbdi.bus.typed import ErrorSink, messages
+from cbdi.wire.world import Tick
+
+__all__ = ["Clock", "ManualClock", "SimClock", "WallClock", "follow_world_clock"]
 
 
 class Clock(Protocol):
@@ -103,3 +108,9 @@ class SimClock(_SteppedClock):
             return
         self.epoch = epoch
         self._set(max(when, self._now))
+
+
+async def follow_world_clock(bus: Bus, clock: SimClock, sink: ErrorSink) -> None:
+    """Keep `clock` on the world's time: apply every `Tick` published on the clock key."""
+    async for _, tick in messages(bus, keys.world_stream("clock"), Tick, sink):
+        clock.on_tick(tick.epoch, tick.time)
