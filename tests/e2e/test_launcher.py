@@ -125,3 +125,15 @@ def test_ctrl_c_stops_everything(tmp_path: Path) -> None:
     for pid in pids:  # no child left behind
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_broken_map_fails_the_run_at_once_with_the_map_error(tmp_path: Path) -> None:
+    bad_map = tmp_path / "bad.toml"
+    bad_map.write_text('name = "bad"\ngrid = """\nBA.\n.x.\n"""\n')
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text(f'name = "bad"\nmap = "{bad_map}"\n[[agents]]\nname = "robot1"\n')
+    result = up(str(scenario), "--json", "--quiet", timeout=60)
+    summary = json.loads(result.stdout)
+    assert result.returncode == 1 and summary["result"] == "failed"
+    assert "grid row 1 column 1: unknown cell 'x'" in summary["reason"]
+    assert summary["restarts"]["world"] == 0  # a bad map is not retried

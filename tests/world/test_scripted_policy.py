@@ -43,9 +43,17 @@ def test_greedy_explores_unsensed_cells_then_rests() -> None:
 
 def test_percepts_revise_litter_and_blocked_cells() -> None:
     b = beliefs(position=(0, 1), litter={"gone": (1, 1), "far": (4, 2)})
-    p = Percepts(agent="r", epoch=1, time=1.0, position=(0, 1), depth=1, free=[(1, 1)],
-                 blocked=[(0, 0), (1, 0), (0, 2)], holding=[],
-                 litter=[LitterView(name="new", cell=(0, 2), known=False)])
+    p = Percepts(
+        agent="r",
+        epoch=1,
+        time=1.0,
+        position=(0, 1),
+        depth=1,
+        free=[(1, 1)],
+        blocked=[(0, 0), (1, 0), (0, 2)],
+        holding=[],
+        litter=[LitterView(name="new", cell=(0, 2), known=False)],
+    )
     b.revise(p)
     assert b.litter == {"far": (4, 2), "new": (0, 2)}  # sensed empty cell clears "gone"
     assert b.blocked == {(1, 0), (0, 2)}  # the bin is static, not an obstacle that moves
@@ -54,7 +62,10 @@ def test_percepts_revise_litter_and_blocked_cells() -> None:
 
 def test_parse_script() -> None:
     assert parse_script("move:1,2; pickup recycle:x") == [
-        Step("move", target=(1, 2)), Step("pickup"), Step("recycle", item="x")]
+        Step("move", target=(1, 2)),
+        Step("pickup"),
+        Step("recycle", item="x"),
+    ]
     with pytest.raises(ValueError, match="move:X,Y"):
         parse_script("move:1")
     with pytest.raises(ValueError, match="expected"):

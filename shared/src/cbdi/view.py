@@ -63,14 +63,20 @@ async def world_info(bus: Bus, timeout: float = 10.0) -> WorldInfo:
                 await asyncio.sleep(0.2)
 
 
-async def follow_text(bus: Bus, out: TextIO) -> None:
-    """Print a frame for every world snapshot (clearing the screen on a terminal)."""
+async def follow_text(bus: Bus, out: TextIO, frames: int = 0) -> None:
+    """Print a frame for every world snapshot (clearing the screen on a terminal).
+
+    With `frames` > 0, stop after that many frames.
+    """
     snaps = messages(bus, keys.world_stream("snapshot"), WorldSnapshot, LogSink())
     info = await world_info(bus)
     clear = "\x1b[2J\x1b[H" if out.isatty() else ""
     async for _, snap in snaps:
         out.write(f"{clear}{render(info, snap)}\n\n")
         out.flush()
+        frames -= 1
+        if frames == 0:
+            return
 
 
 @dataclass(frozen=True)
@@ -95,7 +101,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     async def run() -> None:
         bus = await open_bus(settings.bus_config())
         try:
-            await follow_text(bus, sys.stdout)
+            await follow_text(bus, sys.stdout, settings.frames)
         finally:
             await bus.close()
 

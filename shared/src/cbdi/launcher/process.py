@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 __all__ = ["ManagedProcess", "ProcessSpec", "RestartPolicy"]
 
 RESTART_POLICIES = ("never", "on-failure", "always")
+EXIT_BAD_CONFIG = 2  # what every cbdi service exits with on bad settings or input files
 
 
 @dataclass(frozen=True)
@@ -30,6 +31,8 @@ class RestartPolicy:
     def should_restart(self, returncode: int, restarts: int) -> bool:
         """Decide on a restart after an exit with `returncode` (negative: killed by signal)."""
         if restarts >= self.max_restarts or self.mode == "never":
+            return False
+        if returncode == EXIT_BAD_CONFIG:  # a bad map or setting will not mend itself
             return False
         return self.mode == "always" or returncode != 0
 

@@ -199,9 +199,24 @@ async def _start_all(
 
 
 async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: LaunchOptions) -> None:
+    """Wait until every process of `group` is alive; fail early if one gives up."""
     names = [p.spec.service for p in group]
+    alive = asyncio.ensure_future(live.wait_for(names, opts.startup_timeout))
+    failures = [asyncio.ensure_future(p.failed.wait()) for p in group]
     try:
-        await live.wait_for(names, opts.startup_timeout)
+        await asyncio.wait([alive, *failures], return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for f in failures:
+            f.cancel()
+    dead = [p for p in group if p.failed.is_set()]
+    if dead:
+        alive.cancel()
+        tail = " | ".join(dead[0].tail) if dead[0].tail else "no output"
+        raise CbdiError(
+            f"{dead[0].spec.service} exited {dead[0].exit_codes[-1]} while starting: {tail}"
+        )
+    try:
+        alive.result()
     except TimeoutError:
         missing = [n for n in names if n not in live.alive]
         raise CbdiError(
