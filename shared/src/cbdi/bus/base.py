@@ -7,6 +7,7 @@ here; typed messages are encoded and decoded by `cbdi.bus.typed` on top of this.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -16,10 +17,16 @@ __all__ = ["AliveEvent", "Bus", "Handler", "Sample", "Subscription", "Token"]
 
 @dataclass(frozen=True, slots=True)
 class Sample:
-    """A published payload and the concrete key it was published on."""
+    """A published payload, the concrete key it was published on, and the sender's stamp.
+
+    `seq` counts the sender's publications on this key (from 1) and `sent_ns` is the
+    sender's wall time at publication (ns since the epoch); both 0 if the sender gave none.
+    """
 
     key: str
     payload: bytes
+    seq: int = 0
+    sent_ns: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,7 +55,12 @@ class Token(Protocol):
 
 
 class Bus(Protocol):
-    """Everything a service may do on the network."""
+    """Everything a service may do on the network.
+
+    `sent` counts publications per key (what a recorder must find in its file).
+    """
+
+    sent: Counter[str]
 
     async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
         """Publish `payload` on `key`; `block` (commands, plans) never drops under load."""

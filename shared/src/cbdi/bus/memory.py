@@ -8,6 +8,8 @@ immediate and in publication order. Key matching uses Zenoh's own key expression
 from __future__ import annotations
 
 import asyncio
+import time
+from collections import Counter
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
@@ -91,6 +93,7 @@ class MemoryBus:
         self._closed = False
         self._subscriptions: list[_MemorySubscription] = []
         self._tokens: list[_MemoryToken] = []
+        self.sent: Counter[str] = Counter()
 
     def _check(self) -> None:
         if self._closed:
@@ -98,7 +101,8 @@ class MemoryBus:
 
     async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
         self._check()
-        sample = Sample(key, bytes(payload))
+        seq = self.sent[key] = self.sent[key] + 1
+        sample = Sample(key, bytes(payload), seq, time.time_ns())
         self.network.published.append(sample)
         for sub in list(self.network.subscribers):
             if _matches(sub.key_expr, key):

@@ -10,10 +10,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-from collections import OrderedDict
+import struct
+import time
+from collections import Counter, OrderedDict, deque
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import zenoh
 from zenoh.handlers import Callback
@@ -23,6 +25,7 @@ from cbdi.errors import BusClosedError, ConfigError, RequestFailedError, Request
 
 __all__ = ["BusConfig", "ZenohBus", "open_bus", "zenoh_config"]
 
+T = TypeVar("T")
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 _MAX_PUBLISHERS = 1024
 
@@ -74,6 +77,26 @@ async def open_bus(cfg: BusConfig) -> ZenohBus:
     return ZenohBus(session, asyncio.get_running_loop())
 
 
+_STAMP = struct.Struct("<QQ")
+
+
+def stamp(seq: int) -> bytes:
+    """Return the attachment every publication carries: sequence and wall time (ns)."""
+    # Wall time on purpose: it is the sender's publish time recorded in MCAP files.
+    return _STAMP.pack(seq, time.time_ns())
+
+
+def unstamp(attachment: Any) -> tuple[int, int]:
+    """Read (sequence, sent_ns) from an attachment; (0, 0) if absent or foreign."""
+    if attachment is None:
+        return 0, 0
+    raw = attachment.to_bytes()
+    if len(raw) != _STAMP.size:
+        return 0, 0
+    seq, sent_ns = _STAMP.unpack(raw)
+    return int(seq), int(sent_ns)
+
+
 def _post(loop: asyncio.AbstractEventLoop, fn: Any, *args: Any) -> None:
     """Hand a call to the loop from a Zenoh thread; a closed loop means we are exiting."""
     try:  # noqa: SIM105  (not contextlib.suppress: this runs for every sample)
@@ -82,13 +105,41 @@ def _post(loop: asyncio.AbstractEventLoop, fn: Any, *args: Any) -> None:
         pass
 
 
+class _Inbox(Generic[T]):
+    """A minimal unbounded queue for the loop thread (cheaper than asyncio.Queue).
+
+    Items arrive through `put` (called on the loop via `call_soon_threadsafe`); `get`
+    waits for the next one. Nothing is ever dropped.
+    """
+
+    def __init__(self) -> None:
+        self._items: deque[T] = deque()
+        self._waiter: asyncio.Future[None] | None = None
+
+    def put(self, item: T) -> None:
+        self._items.append(item)
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
+
+    async def get(self) -> T:
+        while not self._items:
+            self._waiter = asyncio.get_running_loop().create_future()
+            try:
+                await self._waiter
+            finally:
+                self._waiter = None
+        return self._items.popleft()
+
+
 class _ZenohSubscription:
     def __init__(self, bus: ZenohBus, key_expr: str) -> None:
-        self.queue: asyncio.Queue[Sample | None] = asyncio.Queue()
-        loop, put = bus.loop, self.queue.put_nowait
+        self.queue: _Inbox[Sample | None] = _Inbox()
+        loop, put = bus.loop, self.queue.put
 
         def on_sample(s: zenoh.Sample) -> None:
-            _post(loop, put, Sample(str(s.key_expr), s.payload.to_bytes()))
+            seq, sent_ns = unstamp(s.attachment)
+            _post(loop, put, Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns))
 
         self._bus = bus
         self._sub: Any = bus.session.declare_subscriber(
@@ -109,7 +160,7 @@ class _ZenohSubscription:
             self._bus._closeables.discard(self)
             with contextlib.suppress(zenoh.ZError):
                 sub.undeclare()
-            self.queue.put_nowait(None)
+            self.queue.put(None)
 
 
 class _ZenohToken:
@@ -134,6 +185,7 @@ class ZenohBus:
         self.loop = loop
         self._closeables: set[_ZenohSubscription | _ZenohToken] = set()
         self._publishers: OrderedDict[tuple[str, bool], Any] = OrderedDict()
+        self.sent: Counter[str] = Counter()  # publications per key, also the sequence
         self._queriers: OrderedDict[tuple[str, float], Any] = OrderedDict()
         self._closed = False
 
@@ -146,7 +198,8 @@ class ZenohBus:
         publisher = self._publishers.get((key, block))
         if publisher is None:
             publisher = self._declare_publisher(key, block)
-        publisher.put(payload)
+        seq = self.sent[key] = self.sent[key] + 1
+        publisher.put(payload, attachment=stamp(seq))
 
     def _declare_querier(self, key: str, timeout: float) -> Any:
         """Declare (and cache) a querier for `key`: repeated requests skip declaration."""
@@ -209,8 +262,8 @@ class ZenohBus:
 
     async def serve(self, key_expr: str, handler: Handler) -> None:
         self._check()
-        queue: asyncio.Queue[zenoh.Query] = asyncio.Queue()
-        loop, put = self.loop, queue.put_nowait
+        queue: _Inbox[zenoh.Query] = _Inbox()
+        loop, put = self.loop, queue.put
 
         def on_query(query: zenoh.Query) -> None:
             _post(loop, put, query)
@@ -243,8 +296,8 @@ class ZenohBus:
 
     async def watch_alive(self, key_expr: str) -> AsyncIterator[AliveEvent]:
         self._check()
-        queue: asyncio.Queue[AliveEvent] = asyncio.Queue()
-        loop, put = self.loop, queue.put_nowait
+        queue: _Inbox[AliveEvent] = _Inbox()
+        loop, put = self.loop, queue.put
 
         def on_sample(s: zenoh.Sample) -> None:
             alive = s.kind == zenoh.SampleKind.PUT

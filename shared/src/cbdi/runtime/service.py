@@ -149,6 +149,8 @@ async def _run(settings: ServiceSettings, service: str, main: ServiceMain, log: 
             loop.remove_signal_handler(sig)
         await ctx._flush_reports()
         await bus.close()
+    for key, count in sorted(bus.sent.items()):
+        log.info("sent", key=key, count=count)
     log.info("stopped", exit_code=ctx.exit_code, **_counter_fields(ctx))
     return ctx.exit_code
 
