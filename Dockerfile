@@ -1,4 +1,5 @@
-# One image for every cbdi service; the command picks the service.
+# One image for every cbdi service; the command picks the service. The monitor's rerun
+# extra (rerun-sdk, ~770 MB) is not installed here: `cbdi view` runs on the host.
 #   docker build -t cbdi .                       (or: podman build -t cbdi .)
 #   docker build --build-arg BASE_IMAGE=localhost/debian-python:3.11 -t cbdi .
 # The base must provide Python 3.11 with pip and venv. No registry is reachable on some
@@ -18,7 +19,8 @@ ENV PATH=/opt/venv/bin:$PATH
 COPY shared ./shared
 COPY services ./services
 COPY domains ./domains
-RUN pip install --no-cache-dir --no-deps --no-build-isolation ./shared ./services/world
+RUN pip install --no-cache-dir --no-deps --no-build-isolation \
+      ./shared ./services/world ./services/monitor
 
 ENV CBDI_DOMAINS=/opt/cbdi/domains
 # Services connect to the router through CBDI_CONNECT (set in docker-compose.yml).

@@ -4,10 +4,10 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := shared services/world
+PACKAGES := shared services/world services/monitor
 PYTEST_ARGS ?=
 
-.PHONY: venv demo test lint bench clean compose-tools
+.PHONY: venv demo test lint bench clean system-tools
 
 venv: $(STAMP)
 
@@ -17,27 +17,33 @@ $(STAMP): requirements.lock requirements-dev.lock $(foreach p,$(PACKAGES),$(p)/p
 	$(BIN)/python -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation $(foreach p,$(PACKAGES),-e $(p))
 	touch $(STAMP)
 
-# docker-compose (Compose v1) validates docker-compose.yml offline; install it when missing.
-compose-tools:
-	@command -v docker-compose >/dev/null 2>&1 || { \
-	  echo "installing docker-compose (Debian package) to validate docker-compose.yml"; \
-	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq docker-compose) >/dev/null 2>&1 \
-	  || echo "warning: could not install docker-compose; the compose test will fail"; }
+# Debian packages the tests use, installed when missing: docker-compose (Compose v1)
+# validates docker-compose.yml offline; chromium renders the rerun web viewer.
+SYSTEM_TOOLS := docker-compose:docker-compose chromium:chromium
+system-tools:
+	@missing=""; for t in $(SYSTEM_TOOLS); do \
+	  command -v $${t%%:*} >/dev/null 2>&1 || missing="$$missing $${t#*:}"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages for the tests:$$missing"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing) \
+	    >/dev/null 2>&1 || echo "warning: could not install$$missing; tests needing them fail"; \
+	fi
 
 demo: venv
 	$(BIN)/cbdi up paper-7x7 --view text --quiet --until done
 
-test: venv compose-tools
+test: venv system-tools
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 lint: venv
 	$(BIN)/ruff check shared services tests benchmarks
 	$(BIN)/mypy --strict shared/src/cbdi
-	$(BIN)/mypy services/world/src
+	$(BIN)/mypy services/world/src services/monitor/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py
 	$(BIN)/python benchmarks/world_epochs.py
+	$(BIN)/python benchmarks/recorder.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

@@ -31,7 +31,7 @@ def test_compose_file_is_valid() -> None:
 def test_compose_runs_router_world_and_an_agent_against_the_router() -> None:
     result = _config(REPO / "docker-compose.yml", "--services")
     assert result.returncode == 0, result.stderr
-    assert {"router", "world", "robot1"} <= set(result.stdout.split())
+    assert {"router", "monitor", "world", "robot1"} <= set(result.stdout.split())
     full = _config(REPO / "docker-compose.yml").stdout
     assert "CBDI_CONNECT: tcp/router:7447" in full
     assert "BASE_IMAGE" in full

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -34,6 +35,7 @@ class Proc:
             stdin=subprocess.DEVNULL,
             env={**os.environ, **(env or {})},
             cwd=REPO,
+            start_new_session=True,  # its own process group: stop() reaches its children too
         )
 
     def alive(self) -> bool:
@@ -51,6 +53,8 @@ class Proc:
             except subprocess.TimeoutExpired:
                 self.popen.kill()
                 self.popen.wait()
+        with contextlib.suppress(ProcessLookupError):  # children left by wrapper scripts
+            os.killpg(self.popen.pid, signal.SIGKILL)
         self._log.close()
         return self.popen.returncode
 

@@ -36,3 +36,21 @@ def test_trace_keys_stay_under_root() -> None:
 def test_bad_agent_names_are_refused(bad: str) -> None:
     with pytest.raises(ValueError, match="name"):
         keys.validate_name(bad)
+
+
+@pytest.mark.parametrize(
+    ("key", "agent", "component", "stream"),
+    [
+        ("cbdi/robot1/planner/plans", "robot1", "planner", "plans"),
+        ("cbdi/world/percepts/robot2", "robot2", "world", "percepts/robot2"),
+        ("cbdi/world/clock", "", "world", "clock"),
+        ("cbdi/alive/robot1/executor", "robot1", "executor", "alive"),
+        ("cbdi/alive/world", "", "world", "alive"),
+        ("cbdi/trace/world/rpc/act/request", "", "trace", "world/rpc/act/request"),
+        ("other/thing", "", "", "other/thing"),
+    ],
+)
+def test_describe_names_the_parts_of_a_key(
+    key: str, agent: str, component: str, stream: str
+) -> None:
+    assert keys.describe(key) == {"agent": agent, "component": component, "stream": stream}

@@ -30,6 +30,8 @@ def _usage(plugins: dict[str, object]) -> str:
     for name, (_, text) in sorted(_BUILTIN.items()):
         lines.append(f"  {name:<10} {text}")
     for name, ep in sorted(plugins.items()):
+        if name in _BUILTIN:
+            continue
         lines.append(f"  {name:<10} (from {getattr(ep, 'value', '?').split(':')[0]})")
     lines.append("")
     lines.append("Run `cbdi COMMAND --help` for a command's options.")
@@ -37,7 +39,9 @@ def _usage(plugins: dict[str, object]) -> str:
 
 
 def _resolve(name: str, plugins: dict[str, object]) -> Command | None:
-    if name in _BUILTIN:
+    # A service's command wins over a built-in of the same name (the monitor's `view`
+    # extends the built-in text view with rerun).
+    if name in _BUILTIN and name not in plugins:
         module = __import__(_BUILTIN[name][0], fromlist=["main"])
         command: Command = module.main
         return command

@@ -29,7 +29,9 @@ __all__ = [
     "agent_stream",
     "alive",
     "component_rpc",
+    "describe",
     "errors",
+    "monitor_stream",
     "service_id",
     "service_of_alive",
     "trace",
@@ -113,6 +115,11 @@ def agent_ack_all() -> str:
     return agent_stream("*", "executor", "ack")
 
 
+def monitor_stream(stream: str) -> str:
+    """Return the key of a monitor stream (`health`)."""
+    return f"{ROOT}/monitor/{stream}"
+
+
 def service_id(component: str, agent: str | None = None) -> str:
     """Return the id of a service: `world`, `monitor`, or `<agent>/<component>`."""
     return f"{agent}/{component}" if agent else component
@@ -132,6 +139,29 @@ def service_of_alive(key: str) -> str:
 def errors(service: str) -> str:
     """Return the error stream of a service id (`world` or `<agent>/<component>`)."""
     return f"{ROOT}/{service}/errors"
+
+
+def describe(key: str) -> dict[str, str]:
+    """Name the parts of a concrete key: agent, component, stream (empty when shared).
+
+    `cbdi/robot1/planner/plans` -> agent robot1, component planner, stream plans;
+    `cbdi/world/percepts/robot1` -> agent robot1, component world, stream percepts;
+    `cbdi/alive/robot1/executor` -> agent robot1, component executor, stream alive.
+    """
+    parts = key.split("/")
+    if len(parts) < 2 or parts[0] != ROOT:
+        return {"agent": "", "component": "", "stream": key}
+    head, rest = parts[1], parts[2:]
+    if head == WORLD:
+        agent = rest[1] if len(rest) == 2 and rest[0] in ("percepts", "outcomes") else ""
+        return {"agent": agent, "component": WORLD, "stream": "/".join(rest)}
+    if head == "alive":
+        if len(rest) == 2:
+            return {"agent": rest[0], "component": rest[1], "stream": "alive"}
+        return {"agent": "", "component": "/".join(rest), "stream": "alive"}
+    if head in ("trace", "monitor"):
+        return {"agent": "", "component": head, "stream": "/".join(rest)}
+    return {"agent": head, "component": rest[0] if rest else "", "stream": "/".join(rest[1:])}
 
 
 def trace(key: str) -> str:

@@ -135,6 +135,8 @@ class WorldService:
     async def run(self) -> None:
         """Publish epoch 0, then step until the run ends; keep serving requests after."""
         await self.wait_for_agents()
+        # The static world once, for recorders and viewers (also on request: rpc/info).
+        await publish(self.ctx.bus, keys.world_stream("info"), self.world.info(), block=True)
         await self.publish_epoch(self.world.initial())
         start = self.clock.now()
         while self.finished is None:

@@ -106,25 +106,46 @@ def _post(loop: asyncio.AbstractEventLoop, fn: Any, *args: Any) -> None:
 
 
 class _Inbox(Generic[T]):
-    """A minimal unbounded queue for the loop thread (cheaper than asyncio.Queue).
+    """An unbounded queue fed from Zenoh threads, read on the loop; nothing is dropped.
 
-    Items arrive through `put` (called on the loop via `call_soon_threadsafe`); `get`
-    waits for the next one. Nothing is ever dropped.
+    `push` may be called from any thread: items gather in a deque and the loop is woken
+    once per burst (one `call_soon_threadsafe` for many samples under load, which is what
+    lets a recorder keep up). `get` and `get_all` run on the loop.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._incoming: deque[T] = deque()  # appended on Zenoh threads (atomic under the GIL)
         self._items: deque[T] = deque()
+        self._scheduled = False
         self._waiter: asyncio.Future[None] | None = None
 
+    def push(self, item: T) -> None:
+        self._incoming.append(item)
+        if not self._scheduled:
+            self._scheduled = True
+            _post(self._loop, self._flush)
+
     def put(self, item: T) -> None:
+        """Add an item from the loop thread."""
         self._items.append(item)
+        self._wake()
+
+    def _flush(self) -> None:
+        self._scheduled = False  # before draining: a later push schedules a new flush
+        incoming, items = self._incoming, self._items
+        while incoming:
+            items.append(incoming.popleft())
+        self._wake()
+
+    def _wake(self) -> None:
         waiter = self._waiter
         if waiter is not None and not waiter.done():
             waiter.set_result(None)
 
     async def get(self) -> T:
         while not self._items:
-            self._waiter = asyncio.get_running_loop().create_future()
+            self._waiter = self._loop.create_future()
             try:
                 await self._waiter
             finally:
@@ -134,17 +155,15 @@ class _Inbox(Generic[T]):
 
 class _ZenohSubscription:
     def __init__(self, bus: ZenohBus, key_expr: str) -> None:
-        self.queue: _Inbox[Sample | None] = _Inbox()
-        loop, put = bus.loop, self.queue.put
+        self.queue: _Inbox[Sample | None] = _Inbox(bus.loop)
+        push = self.queue.push
 
         def on_sample(s: zenoh.Sample) -> None:
             seq, sent_ns = unstamp(s.attachment)
-            _post(loop, put, Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns))
+            push(Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns))
 
         self._bus = bus
-        self._sub: Any = bus.session.declare_subscriber(
-            key_expr, Callback(on_sample, indirect=False)
-        )
+        self._sub: Any = bus.session.declare_subscriber(key_expr, Callback(on_sample))
         bus._closeables.add(self)
 
     def __aiter__(self) -> AsyncIterator[Sample]:
@@ -262,11 +281,8 @@ class ZenohBus:
 
     async def serve(self, key_expr: str, handler: Handler) -> None:
         self._check()
-        queue: _Inbox[zenoh.Query] = _Inbox()
-        loop, put = self.loop, queue.put
-
-        def on_query(query: zenoh.Query) -> None:
-            _post(loop, put, query)
+        queue: _Inbox[zenoh.Query] = _Inbox(self.loop)
+        on_query = queue.push
 
         queryable = self.session.declare_queryable(
             key_expr, Callback(on_query, indirect=False), complete=True
@@ -296,15 +312,14 @@ class ZenohBus:
 
     async def watch_alive(self, key_expr: str) -> AsyncIterator[AliveEvent]:
         self._check()
-        queue: _Inbox[AliveEvent] = _Inbox()
-        loop, put = self.loop, queue.put
+        queue: _Inbox[AliveEvent] = _Inbox(self.loop)
+        push = queue.push
 
         def on_sample(s: zenoh.Sample) -> None:
-            alive = s.kind == zenoh.SampleKind.PUT
-            _post(loop, put, AliveEvent(str(s.key_expr), alive))
+            push(AliveEvent(str(s.key_expr), s.kind == zenoh.SampleKind.PUT))
 
         sub = self.session.liveliness().declare_subscriber(
-            key_expr, Callback(on_sample, indirect=False), history=True
+            key_expr, Callback(on_sample), history=True
         )
         try:
             while True:

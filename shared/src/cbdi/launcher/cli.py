@@ -61,6 +61,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--startup-timeout", type=float, default=30.0, help="seconds to become alive")
     p.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit in seconds")
     p.add_argument("--quiet", action="store_true", help="do not echo the services' logs")
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        default="",
+        help="record every message of the run to an MCAP file (needs cbdi-monitor)",
+    )
     return p
 
 
@@ -111,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         wall_timeout=args.timeout,
         view=args.view,
         quiet=args.quiet,
+        record=args.record,
     )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]

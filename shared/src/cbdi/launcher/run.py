@@ -46,6 +46,7 @@ class LaunchOptions:
     wall_timeout: float = 0.0
     view: str = "none"
     quiet: bool = False
+    record: str = ""
 
 
 @dataclass
@@ -74,7 +75,7 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _specs(scenario: Scenario, endpoint: str) -> list[ProcessSpec]:
+def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessSpec]:
     env = {"CBDI_CONNECT": endpoint}
     run = scenario.run
     world_args = ["--map", str(scenario.map_path), "--speed", str(run.speed)]
@@ -87,12 +88,17 @@ def _specs(scenario: Scenario, endpoint: str) -> list[ProcessSpec]:
     for agent in scenario.agents:
         depth = f":{agent.detection_depth}" if agent.detection_depth is not None else ""
         world_args += ["--agent", f"{agent.name}{depth}"]
+    monitor = []
+    if record:
+        argv = argv_of(console_script("cbdi-monitor", "cbdi_monitor.cli"), "--output", record)
+        monitor = [ProcessSpec("monitor", argv, env)]
     specs = [
         ProcessSpec(
             "router",
             argv_of(console_script("cbdi", "cbdi.cli"), "router", "--listen", endpoint),
             {},
         ),
+        *monitor,
         ProcessSpec(
             "world", argv_of(console_script("cbdi-world", "cbdi_world.cli"), world_args), env
         ),
@@ -143,7 +149,8 @@ async def launch(
     """Run `scenario` to its end and return the summary; never leaves a child behind."""
     summary = RunSummary(scenario=scenario.name)
     endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
-    procs = [ManagedProcess(spec, opts.restart, say) for spec in _specs(scenario, endpoint)]
+    specs = _specs(scenario, endpoint, opts.record)
+    procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
     started = time.monotonic()
     bus: Bus | None = None
     try:
@@ -189,7 +196,9 @@ async def _start_all(
     live = _Liveliness()
     tg.create_task(live.follow(bus))
     await _wait_alive(live, [router], opts)
-    for group in (rest[:1], rest[1:]):  # the world first, then every agent service at once
+    # One at a time: the monitor (so it misses nothing), the world; then all agent services.
+    singles = 2 if opts.record else 1
+    for group in [*([p] for p in rest[:singles]), rest[singles:]]:
         for proc in group:
             await proc.start()
             tg.create_task(proc.supervise())

@@ -39,7 +39,9 @@ def _is_bool(tp: Any) -> bool:
     return tp is bool or tp == "bool"
 
 
-def _parser(cls: type[Any], prog: str, description: str) -> argparse.ArgumentParser:
+def _parser(
+    cls: type[Any], prog: str, description: str, positional: Sequence[str] = ()
+) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument("--config", metavar="FILE", help="TOML file with settings")
     hints = typing.get_type_hints(cls)
@@ -49,7 +51,9 @@ def _parser(cls: type[Any], prog: str, description: str) -> argparse.ArgumentPar
         default = f.default if f.default is not dataclasses.MISSING else None
         if default is not None and not _origin_is_tuple(tp):
             help_text = f"{help_text} (default: {default})".strip()
-        if _is_bool(tp):
+        if f.name in positional:
+            parser.add_argument(f.name, nargs="?", default=None, help=help_text)
+        elif _is_bool(tp):
             parser.add_argument(
                 _flag(f.name),
                 dest=f.name,
@@ -108,9 +112,13 @@ def load_config(
     section: str,
     description: str = "",
     env: Mapping[str, str] | None = None,
+    positional: Sequence[str] = (),
 ) -> T:
-    """Parse `argv`, the environment and the optional TOML file into a `cls` dataclass."""
-    parser = _parser(cls, prog, description)
+    """Parse `argv`, the environment and the optional TOML file into a `cls` dataclass.
+
+    Fields named in `positional` are taken as positional arguments instead of flags.
+    """
+    parser = _parser(cls, prog, description, positional)
     args = parser.parse_args(list(argv) if argv is not None else None)
     sources: dict[str, str] = {}
     merged: dict[str, Any] = {}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from cbdi.wire.base import Message
 
-__all__ = ["ErrorReply", "ErrorReport", "RunFinished"]
+__all__ = ["ErrorReply", "ErrorReport", "Liveliness", "RunFinished", "ServiceHealth"]
 
 
 class ErrorReply(Message, frozen=True, tag="cbdi.ErrorReply/1"):
@@ -33,3 +33,18 @@ class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     reason: str
     epoch: int
     time: float
+
+
+class Liveliness(Message, frozen=True, tag="cbdi.Liveliness/1"):
+    """A liveliness token appeared or vanished (as recorded by the monitor)."""
+
+    key: str
+    alive: bool
+
+
+class ServiceHealth(Message, frozen=True, tag="cbdi.ServiceHealth/1"):
+    """The monitor's word that a service appeared or disappeared, and who is alive now."""
+
+    service: str
+    alive: bool
+    alive_now: list[str]

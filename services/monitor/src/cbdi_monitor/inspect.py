@@ -1,0 +1,151 @@
+"""`cbdi inspect run.mcap`: what is in a recording, and what each agent did.
+
+Channels with message counts, the duration, and per agent: moves, actions by kind and
+outcome, failed and rejected actions, the simulated time of its first action, litter
+recycled, and (once planners run) replans and forecast-triggered repairs.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from cbdi.errors import CbdiError, WireError
+from cbdi.wire.base import decode
+from cbdi.wire.common import RunFinished
+from cbdi.wire.world import ActionOutcome, ActionRequest, Tick, WorldStats
+from cbdi_monitor.reader import RecordedMessage, read_messages
+
+__all__ = ["AgentReport", "Inspection", "inspect_messages", "main"]
+
+ACT_REQUEST = "cbdi/trace/world/rpc/act/request"
+
+
+@dataclass
+class AgentReport:
+    """What one agent did in a recording."""
+
+    moves: int = 0
+    actions: dict[str, int] = field(default_factory=dict)
+    failed: int = 0
+    rejected: int = 0
+    requests: int = 0
+    recycled: int = 0
+    first_action_time: float | None = None
+    replans: int | None = None
+    forecast_repairs: int | None = None
+
+
+@dataclass
+class Inspection:
+    """The whole report of `cbdi inspect`."""
+
+    messages: int = 0
+    channels: dict[str, int] = field(default_factory=dict)
+    duration_s: float = 0.0
+    sim_time: float = 0.0
+    epochs: int = 0
+    result: str = ""
+    undecodable: int = 0
+    agents: dict[str, AgentReport] = field(default_factory=dict)
+    world_stats: dict[str, dict[str, int]] = field(default_factory=dict)
+
+
+def inspect_messages(messages: Iterable[RecordedMessage]) -> Inspection:
+    """Summarise recorded messages (pure: no files, no bus)."""
+    report = Inspection()
+    counts: Counter[str] = Counter()
+    first_ns = last_ns = 0
+    now = 0.0
+    for m in messages:
+        counts[m.key] += 1
+        first_ns = first_ns or m.log_ns
+        last_ns = max(last_ns, m.log_ns)
+        try:
+            now = _account(report, m, now)
+        except WireError:
+            report.undecodable += 1
+    report.messages = sum(counts.values())
+    report.channels = dict(sorted(counts.items()))
+    report.duration_s = round((last_ns - first_ns) / 1e9, 3)
+    return report
+
+
+def _agent(report: Inspection, name: str) -> AgentReport:
+    return report.agents.setdefault(name, AgentReport())
+
+
+def _account(report: Inspection, m: RecordedMessage, now: float) -> float:
+    """Fold one message into the report; return the simulated time now."""
+    if m.schema == "cbdi.world.Tick/1":
+        tick = decode(m.payload, Tick, m.key)
+        report.epochs, report.sim_time = tick.epoch, tick.time
+        return tick.time
+    if m.schema == "cbdi.world.ActionOutcome/1":
+        _outcome(_agent(report, (o := decode(m.payload, ActionOutcome, m.key)).agent), o)
+    elif m.key == ACT_REQUEST and m.schema == "cbdi.world.ActionRequest/1":
+        agent = _agent(report, decode(m.payload, ActionRequest, m.key).agent)
+        agent.requests += 1
+        if agent.first_action_time is None:
+            agent.first_action_time = now
+    elif m.schema == "cbdi.world.WorldStats/1":
+        stats = decode(m.payload, WorldStats, m.key)
+        report.world_stats = {a.agent: _stats_dict(a) for a in stats.agents}
+    elif m.schema == "cbdi.RunFinished/1":
+        report.result = decode(m.payload, RunFinished, m.key).reason
+    return now
+
+
+def _outcome(agent: AgentReport, o: ActionOutcome) -> None:
+    key = f"{o.action}:{o.status}"
+    agent.actions[key] = agent.actions.get(key, 0) + 1
+    if o.status != "succeeded":
+        agent.failed += 1
+    elif o.action == "move":
+        agent.moves += 1
+    elif o.action == "recycle":
+        agent.recycled += 1
+
+
+def _stats_dict(a: Any) -> dict[str, int]:
+    fields = ("moves", "pickups", "recycled", "blocked", "failed", "rejected", "contacts")
+    return {k: getattr(a, k) for k in fields}
+
+
+def render(report: Inspection) -> str:
+    """Format a report for people."""
+    lines = [
+        f"{report.messages} messages on {len(report.channels)} channels, "
+        f"{report.duration_s:.1f} s recorded, {report.epochs} epochs, "
+        f"{report.sim_time:.1f} simulated s, result: {report.result or '(no end seen)'}"
+    ]
+    lines += [f"  {count:8d}  {key}" for key, count in report.channels.items()]
+    for name, a in sorted(report.agents.items()):
+        first = "-" if a.first_action_time is None else f"t={a.first_action_time:g}"
+        lines.append(
+            f"agent {name}: moves={a.moves} recycled={a.recycled} failed={a.failed} "
+            f"requests={a.requests} first action at {first}"
+        )
+        lines.append("    " + " ".join(f"{k}={v}" for k, v in sorted(a.actions.items())))
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run `cbdi inspect FILE [--json]`."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="cbdi inspect", description=__doc__)
+    parser.add_argument("file", help="an MCAP recording")
+    parser.add_argument("--json", action="store_true", help="machine-readable output")
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    try:
+        report = inspect_messages(read_messages(args.file))
+    except CbdiError as exc:
+        print(f"cbdi inspect: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(asdict(report), indent=2) if args.json else render(report))
+    return 0

@@ -1,0 +1,57 @@
+"""Read a cbdi MCAP recording back, message by message, in log-time order."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+
+from cbdi.errors import CbdiError
+
+__all__ = ["RecordedMessage", "RecordingError", "read_messages"]
+
+
+class RecordingError(CbdiError):
+    """Refuse a file that is not a readable MCAP recording."""
+
+    code = "bad_recording"
+
+
+@dataclass(frozen=True, slots=True)
+class RecordedMessage:
+    """One recorded message with its channel's key, schema name and encoding."""
+
+    key: str
+    payload: bytes
+    log_ns: int
+    publish_ns: int
+    seq: int
+    schema: str
+    encoding: str
+
+
+def read_messages(path: str | Path, keys: list[str] | None = None) -> Iterator[RecordedMessage]:
+    """Yield the messages of `path` (only of `keys` topics, if given) in log-time order."""
+    p = Path(path)
+    try:
+        stream = p.open("rb")
+    except OSError as exc:
+        raise RecordingError(f"{p}: {exc.strerror or exc}") from None
+    with stream:
+        try:
+            reader = make_reader(stream)
+            for _schema, channel, message in reader.iter_messages(topics=keys):
+                yield RecordedMessage(
+                    key=channel.topic,
+                    payload=message.data,
+                    log_ns=message.log_time,
+                    publish_ns=message.publish_time,
+                    seq=message.sequence,
+                    schema=channel.metadata.get("schema", ""),
+                    encoding=channel.message_encoding,
+                )
+        except (McapError, EOFError, ValueError) as exc:
+            raise RecordingError(f"{p}: not a readable MCAP file ({exc})") from None

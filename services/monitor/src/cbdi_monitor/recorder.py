@@ -1,0 +1,134 @@
+"""Write cbdi traffic to MCAP: one channel per key, msgpack payloads, sender stamps.
+
+Each channel's metadata names the agent, the component, the stream and the schema of
+its messages; the schema record carries the message's JSON Schema. Files are chunked and
+zstd-compressed, and rotate by size or duration when asked (`run.mcap`, `run-001.mcap`,
+...). `close()` must run for the file to be readable: the service calls it on SIGTERM.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+from mcap.writer import CompressionType, Writer
+
+from cbdi import keys
+from cbdi_monitor.schemas import json_schema, peek_schema
+
+__all__ = ["ENCODING", "McapRecorder", "Rotation"]
+
+ENCODING = "msgpack"
+
+
+@dataclass(frozen=True)
+class Rotation:
+    """Start a new file after `max_bytes` or `max_seconds` (0: never)."""
+
+    max_bytes: int = 0
+    max_seconds: float = 0.0
+
+
+class McapRecorder:
+    """An open recording (one or more files when rotating)."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        rotation: Rotation | None = None,
+        chunk_size: int = 256 * 1024,
+        profile: str = "cbdi",
+    ) -> None:
+        self.base = Path(path)
+        self.rotation = rotation or Rotation()
+        self.chunk_size = chunk_size
+        self.profile = profile
+        self.files: list[Path] = []
+        self.counts: dict[str, int] = {}
+        self._stream: BinaryIO | None = None
+        self._writer: Writer | None = None
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._opened_ns = 0
+        self.closed = False
+        self.late = 0  # messages that arrived after close (not written)
+
+    def _open(self, log_ns: int) -> Writer:
+        index = len(self.files)
+        path = (
+            self.base
+            if index == 0
+            else self.base.with_name(f"{self.base.stem}-{index:03d}{self.base.suffix}")
+        )
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._stream = path.open("wb")
+        writer = Writer(self._stream, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
+        writer.start(profile=self.profile, library="cbdi-monitor")
+        self.files.append(path)
+        self._writer, self._channels, self._schemas = writer, {}, {}
+        self._opened_ns = log_ns
+        return writer
+
+    def _due_for_rotation(self, log_ns: int) -> bool:
+        r = self.rotation
+        if self._stream is None:
+            return False
+        too_big = r.max_bytes > 0 and self._stream.tell() >= r.max_bytes
+        too_old = r.max_seconds > 0 and log_ns - self._opened_ns >= r.max_seconds * 1e9
+        return too_big or too_old
+
+    def _channel(self, writer: Writer, key: str, payload: bytes) -> int:
+        schema_name = peek_schema(payload)
+        schema_id = self._schemas.get(schema_name, 0)
+        if schema_name and schema_name not in self._schemas:
+            data = json_schema(schema_name)
+            schema_id = (
+                writer.register_schema(name=schema_name, encoding="jsonschema", data=data)
+                if data
+                else 0
+            )
+            self._schemas[schema_name] = schema_id
+        metadata = {**keys.describe(key), "schema": schema_name}
+        channel = writer.register_channel(
+            topic=key, message_encoding=ENCODING, schema_id=schema_id, metadata=metadata
+        )
+        self._channels[key] = channel
+        return channel
+
+    def write(
+        self, key: str, payload: bytes, log_ns: int, publish_ns: int = 0, seq: int = 0
+    ) -> None:
+        """Append one message; `log_ns` is the recorder's receive time."""
+        if self.closed:
+            self.late += 1
+            return
+        writer = self._writer
+        if writer is None or self._due_for_rotation(log_ns):
+            self.finish_file()
+            writer = self._open(log_ns)
+        channel = self._channels.get(key)
+        if channel is None:
+            channel = self._channel(writer, key, payload)
+        writer.add_message(
+            channel_id=channel,
+            log_time=log_ns,
+            data=payload,
+            publish_time=publish_ns or log_ns,
+            sequence=seq & 0xFFFFFFFF,
+        )
+        self.counts[key] = self.counts.get(key, 0) + 1
+
+    def finish_file(self) -> None:
+        """Finish the current file (summary, index, footer) so it is readable."""
+        if self._writer is not None:
+            self._writer.finish()
+            self._writer = None
+        if self._stream is not None:
+            self._stream.close()
+            self._stream = None
+
+    def close(self) -> None:
+        """Finish the recording; nothing is written after this."""
+        self.finish_file()
+        self.closed = True

@@ -1,0 +1,53 @@
+"""Every wire type by schema name, and its JSON Schema (for MCAP schema records)."""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+
+import msgspec
+
+import cbdi.wire.common
+import cbdi.wire.world
+from cbdi.wire.base import Message, schema_of
+
+__all__ = ["json_schema", "peek_schema", "wire_classes"]
+
+
+class _Peek(msgspec.Struct):
+    schema: str = ""
+
+
+_peek = msgspec.msgpack.Decoder(_Peek)
+
+
+def peek_schema(payload: bytes) -> str:
+    """Return the `schema` field of a msgpack message, or "" if it has none."""
+    try:
+        return _peek.decode(payload).schema
+    except (msgspec.DecodeError, TypeError):
+        return ""
+
+
+@cache
+def wire_classes() -> dict[str, type[Message]]:
+    """Return every known message class by its schema name."""
+    found: dict[str, type[Message]] = {}
+    todo = list(Message.__subclasses__())
+    while todo:
+        cls = todo.pop()
+        todo.extend(cls.__subclasses__())
+        found[schema_of(cls)] = cls
+    return found
+
+
+@cache
+def json_schema(name: str) -> bytes:
+    """Return the JSON Schema of message `name` (b"" if unknown)."""
+    cls = wire_classes().get(name)
+    if cls is None:
+        return b""
+    return json.dumps(msgspec.json.schema(cls)).encode()
+
+
+assert cbdi.wire.common  # keep the import for its side effect

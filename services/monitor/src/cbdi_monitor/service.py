@@ -1,0 +1,104 @@
+"""The monitor service: record everything on `cbdi/**` and every liveliness change.
+
+Zenoh subscribers see publications only, so requests and replies reach the file through
+the trace keys every typed request endpoint publishes on. Services appearing and
+disappearing are logged, recorded and announced on `cbdi/monitor/health`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from dataclasses import dataclass, field
+
+from cbdi import keys
+from cbdi.bus.base import AliveEvent, Sample, Subscription
+from cbdi.runtime import ServiceContext, ServiceSettings
+from cbdi.runtime.service import ServiceMain
+from cbdi.wire.base import encode
+from cbdi.wire.common import Liveliness, ServiceHealth
+from cbdi_monitor.recorder import McapRecorder, Rotation
+
+__all__ = ["MonitorSettings", "monitor_main"]
+
+ALL = f"{keys.ROOT}/**"
+DRAIN_LIMIT = 30.0  # seconds a stopping monitor may spend writing its backlog
+
+
+@dataclass(frozen=True)
+class MonitorSettings(ServiceSettings):
+    """Settings of `cbdi-monitor`."""
+
+    output: str = field(default="run.mcap", metadata={"help": "MCAP file to write"})
+    rotate_mb: float = field(default=0.0, metadata={"help": "start a new file every N MB"})
+    rotate_seconds: float = field(default=0.0, metadata={"help": "new file every N seconds"})
+    drain: float = field(default=0.3, metadata={"help": "seconds to drain in-flight at stop"})
+
+
+class Monitor:
+    """Glue between the bus and one `McapRecorder`."""
+
+    def __init__(self, ctx: ServiceContext, recorder: McapRecorder, drain: float) -> None:
+        self.ctx, self.recorder, self.drain = ctx, recorder, drain
+        self.alive: set[str] = set()
+
+    async def record(self, sub: Subscription) -> None:
+        """Write every sample; on stop, drain what is still arriving, then finish the file."""
+        it = aiter(sub)
+        try:
+            while True:
+                self.write(await anext(it))
+        except asyncio.CancelledError:
+            await self.drain_rest(it)
+            raise
+        finally:
+            self.recorder.close()
+            self.ctx.log.info(
+                "recorded",
+                files=",".join(map(str, self.recorder.files)),
+                messages=sum(self.recorder.counts.values()),
+            )
+
+    async def drain_rest(self, it: object) -> None:
+        """Write what is queued or still arriving until `drain` s pass with nothing new."""
+        try:
+            async with asyncio.timeout(DRAIN_LIMIT):
+                while True:
+                    sample = await asyncio.wait_for(anext(it), self.drain)  # type: ignore[call-overload]
+                    self.write(sample)
+        except (TimeoutError, StopAsyncIteration):
+            pass
+
+    def write(self, sample: Sample) -> None:
+        self.recorder.write(sample.key, sample.payload, time.time_ns(), sample.sent_ns, sample.seq)
+
+    async def health(self, events: object) -> None:
+        async for event in events:  # type: ignore[attr-defined]
+            await self.on_alive(event)
+
+    async def on_alive(self, event: AliveEvent) -> None:
+        service = keys.service_of_alive(event.key)
+        (self.alive.add if event.alive else self.alive.discard)(service)
+        self.recorder.write(
+            event.key, encode(Liveliness(key=event.key, alive=event.alive)), time.time_ns()
+        )
+        log = self.ctx.log.info if event.alive else self.ctx.log.warning
+        log("service_up" if event.alive else "service_down", service=service)
+        health = ServiceHealth(service=service, alive=event.alive, alive_now=sorted(self.alive))
+        await self.ctx.bus.publish(keys.monitor_stream("health"), encode(health), block=True)
+
+
+def monitor_main(settings: MonitorSettings) -> ServiceMain:
+    """Return the service body of the monitor."""
+
+    async def body(ctx: ServiceContext) -> None:
+        rotation = Rotation(
+            max_bytes=int(settings.rotate_mb * 1e6), max_seconds=settings.rotate_seconds
+        )
+        monitor = Monitor(ctx, McapRecorder(settings.output, rotation), settings.drain)
+        sub = ctx.bus.subscribe(ALL)
+        ctx.start(monitor.record(sub), name="record")
+        ctx.start(monitor.health(ctx.bus.watch_alive(keys.ALIVE_ALL)), name="health")
+        ctx.log.info("recording", output=settings.output)
+
+    return body
