@@ -207,3 +207,35 @@ def _screenshot(rrd: Path, shot: Path, tmp: Path) -> None:
             browser.close()
     finally:
         viewer.stop()
+
+
+def test_live_view_follows_a_running_system(tmp_path: Path) -> None:
+    port = free_port()
+    launcher = Proc(
+        [str(BIN / "cbdi"), "up", "paper-7x7", "--speed", "10", "--port", str(port), "--quiet"],
+        tmp_path / "up.log",
+    )
+    try:
+        wait_for(
+            lambda: "started service=robot1/executor" in launcher.output(),
+            timeout=60,
+            what="the run to start",
+        )
+        rrd = tmp_path / "live.rrd"
+        result = run(
+            "cbdi",
+            "view",
+            "--live",
+            "--seconds",
+            "3",
+            "--rrd",
+            str(rrd),
+            "--connect",
+            f"tcp/127.0.0.1:{port}",
+        )
+        assert result.returncode == 0, result.stderr
+        logged = int(re.search(r"logged (\d+) live messages", result.stderr).group(1))  # type: ignore[union-attr]
+        assert logged > 20  # about 10 epochs/s, each with several messages
+        assert run("rerun", "rrd", "verify", str(rrd)).returncode == 0
+    finally:
+        launcher.stop()
