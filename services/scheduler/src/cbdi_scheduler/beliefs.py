@@ -1,0 +1,122 @@
+"""Beliefs: what an agent holds true, as typed PDDL: instances, predicates, functions.
+
+A `BeliefSet` is immutable; every revision returns a new one, so a reasoner can compare
+before and after (reactive rules fire on change) and nothing is shared by accident.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+__all__ = ["Atom", "Belief", "BeliefSet"]
+
+Atom = tuple[str, ...]  # ("litter_pose", "pla61", "c_6_1"): a predicate or function and its args
+
+INSTANCE, PREDICATE, FUNCTION = "instance", "predicate", "function"
+
+
+@dataclass(frozen=True)
+class Belief:
+    """One belief: an instance (`name` of `type`), a predicate atom, or a function value."""
+
+    kind: str
+    name: str
+    params: tuple[str, ...] = ()
+    type: str = ""
+    value: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in (INSTANCE, PREDICATE, FUNCTION):
+            raise ValueError(f"belief kind must be instance, predicate or function: {self.kind!r}")
+        if not self.name:
+            raise ValueError("a belief needs a name")
+
+    @property
+    def atom(self) -> Atom:
+        return (self.name, *self.params)
+
+    def __str__(self) -> str:
+        if self.kind == INSTANCE:
+            return f"{self.name} - {self.type}"
+        text = f"({' '.join(self.atom)})"
+        return f"{text} = {self.value:g}" if self.kind == FUNCTION else text
+
+
+def instance(name: str, type_: str) -> Belief:
+    return Belief(INSTANCE, name, type=type_)
+
+
+def fact(name: str, *params: str) -> Belief:
+    return Belief(PREDICATE, name, tuple(params))
+
+
+def fluent(name: str, *params: str, value: float) -> Belief:
+    return Belief(FUNCTION, name, tuple(params), value=value)
+
+
+@dataclass(frozen=True)
+class BeliefSet:
+    """An immutable set of beliefs."""
+
+    instances: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    facts: frozenset[Atom] = frozenset()
+    fluents: Mapping[Atom, float] = field(default_factory=lambda: MappingProxyType({}))
+
+    @classmethod
+    def of(cls, beliefs: Iterable[Belief]) -> BeliefSet:
+        return cls().adding(beliefs)
+
+    def adding(self, beliefs: Iterable[Belief]) -> BeliefSet:
+        """Return these beliefs plus `beliefs` (a function belief sets the value)."""
+        inst, facts, flu = dict(self.instances), set(self.facts), dict(self.fluents)
+        for b in beliefs:
+            if b.kind == INSTANCE:
+                inst[b.name] = b.type
+            elif b.kind == PREDICATE:
+                facts.add(b.atom)
+            else:
+                flu[b.atom] = b.value
+        return BeliefSet(MappingProxyType(inst), frozenset(facts), MappingProxyType(flu))
+
+    def removing(self, beliefs: Iterable[Belief]) -> BeliefSet:
+        """Return these beliefs without `beliefs`."""
+        inst, facts, flu = dict(self.instances), set(self.facts), dict(self.fluents)
+        for b in beliefs:
+            if b.kind == INSTANCE:
+                inst.pop(b.name, None)
+            elif b.kind == PREDICATE:
+                facts.discard(b.atom)
+            else:
+                flu.pop(b.atom, None)
+        return BeliefSet(MappingProxyType(inst), frozenset(facts), MappingProxyType(flu))
+
+    def holds(self, b: Belief) -> bool:
+        """Return whether `b` is believed (a function belief: with that value)."""
+        if b.kind == INSTANCE:
+            return self.instances.get(b.name) == b.type
+        if b.kind == PREDICATE:
+            return b.atom in self.facts
+        return self.fluents.get(b.atom) == b.value
+
+    def beliefs(self) -> list[Belief]:
+        """Return every belief, sorted (instances, then facts, then functions)."""
+        out = [instance(n, t) for n, t in sorted(self.instances.items())]
+        out += [Belief(PREDICATE, a[0], a[1:]) for a in sorted(self.facts)]
+        out += [Belief(FUNCTION, a[0], a[1:], value=v) for a, v in sorted(self.fluents.items())]
+        return out
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, BeliefSet):
+            return NotImplemented
+        return (
+            dict(self.instances) == dict(other.instances)
+            and self.facts == other.facts
+            and dict(self.fluents) == dict(other.fluents)
+        )
+
+    def __hash__(self) -> int:
+        return hash(
+            (frozenset(self.instances.items()), self.facts, frozenset(self.fluents.items()))
+        )

@@ -1,0 +1,49 @@
+"""The recycling Events Monitor: turn the world's percepts into belief revisions.
+
+Within the sensed square the percepts are the truth: `free` cells are believed free and
+every other cell of the square not free; litter seen is believed where it is seen, and a
+believed item no longer seen in the square is forgotten there. The agent's own cell,
+what it holds and its load (`loaded_amount`) come with every percept.
+"""
+
+from __future__ import annotations
+
+from cbdi.wire.world import Cell, Percepts
+from cbdi_scheduler.beliefs import BeliefSet, fact, fluent, instance
+
+__all__ = ["cell_name", "revise_from_percepts"]
+
+
+def cell_name(cell: Cell) -> str:
+    """Return the PDDL object of a cell (`c_X_Y`, as in the paper's problems)."""
+    return f"c_{cell[0]}_{cell[1]}"
+
+
+def _stale(atom: tuple[str, ...], square: set[str], me: str) -> bool:
+    """Return whether this epoch's percepts replace what `atom` said."""
+    name, args = atom[0], atom[1:]
+    if name == "free":
+        return args[0] in square
+    if name == "litter_pose":
+        return args[1] in square
+    return name in ("in", "holding") and args[0] == me
+
+
+def revise_from_percepts(
+    beliefs: BeliefSet, p: Percepts, litter_type: str = "plastic"
+) -> BeliefSet:
+    """Return `beliefs` revised with one epoch's percepts of agent `p.agent`."""
+    square = {cell_name(c) for c in (*p.free, *p.blocked, p.position)}
+    me = p.agent
+    stale = [fact(*atom) for atom in beliefs.facts if _stale(atom, square, me)]
+    fresh = [fact("free", cell_name(c)) for c in p.free]
+    fresh.append(fact("in", me, cell_name(p.position)))
+    for item in p.litter:
+        fresh += [
+            instance(item.name, litter_type),
+            fact("litter_pose", item.name, cell_name(item.cell)),
+        ]
+    for held in p.holding:
+        fresh += [instance(held, litter_type), fact("holding", me, held)]
+    fresh.append(fluent("loaded_amount", me, value=float(len(p.holding))))
+    return beliefs.removing(stale).adding(fresh)
