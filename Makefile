@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := shared services/world services/monitor services/scheduler
+PACKAGES := shared services/world services/monitor services/scheduler services/executor
 PYTEST_ARGS ?=
 
 .PHONY: venv demo test lint bench clean system-tools
@@ -38,7 +38,7 @@ test: venv system-tools
 lint: venv
 	$(BIN)/ruff check shared services tests benchmarks
 	$(BIN)/mypy --strict shared/src/cbdi
-	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src
+	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import LitterView, Percepts
-from cbdi_scheduler.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi_scheduler.conditions import Literal, bindings, holds
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
 from cbdi_scheduler.events import revise_from_percepts

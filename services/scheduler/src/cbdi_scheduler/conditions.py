@@ -19,7 +19,7 @@ import re
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 
-from cbdi_scheduler.beliefs import FUNCTION, INSTANCE, PREDICATE, Belief, BeliefSet
+from cbdi.beliefs import FUNCTION, INSTANCE, PREDICATE, Belief, BeliefSet
 
 __all__ = [
     "CHECKS",

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 
-from cbdi_scheduler.beliefs import Belief, BeliefSet
+from cbdi.beliefs import Belief, BeliefSet
 from cbdi_scheduler.conditions import (
     Binding,
     Condition,

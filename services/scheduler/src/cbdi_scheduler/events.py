@@ -8,8 +8,8 @@ what it holds and its load (`loaded_amount`) come with every percept.
 
 from __future__ import annotations
 
+from cbdi.beliefs import BeliefSet, fact, fluent, instance
 from cbdi.wire.world import Cell, Percepts
-from cbdi_scheduler.beliefs import BeliefSet, fact, fluent, instance
 
 __all__ = ["cell_name", "revise_from_percepts"]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from cbdi_scheduler.beliefs import Belief, BeliefSet
+from cbdi.beliefs import Belief, BeliefSet
 from cbdi_scheduler.conditions import Binding, Condition, bindings, substitute_belief
 from cbdi_scheduler.desires import Desire, boosted
 

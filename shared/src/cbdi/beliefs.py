@@ -1,5 +1,8 @@
 """Beliefs: what an agent holds true, as typed PDDL: instances, predicates, functions.
 
+Shared by the scheduler (which revises them), the executor (which checks actions against
+them) and the planner (which plans from them).
+
 A `BeliefSet` is immutable; every revision returns a new one, so a reasoner can compare
 before and after (reactive rules fire on change) and nothing is shared by accident.
 """

@@ -1,0 +1,1 @@
+"""cbdi executor: dispatch time-triggered durative actions to the world, safely."""

@@ -1,0 +1,201 @@
+"""The time-triggered dispatcher: the executor's pure core.
+
+Steps start at their scheduled time, one action at a time (the world runs one action per
+robot), each only if its at-start conditions hold in the current beliefs; a step whose
+conditions fail is refused, a step the world rejects or fails ends the plan (the rest is
+cancelled) so that a repaired plan can take over. A plan with a new baseline replaces the
+queue. An early arrest after step A lets what already started finish, starts nothing
+after A, and reports the state once nothing runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from cbdi.beliefs import BeliefSet
+from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
+from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest
+from cbdi_executor.binding import UnboundActionError, to_request
+from cbdi_executor.checks import describe, first_failing
+
+__all__ = ["Dispatcher", "Effects", "StepState"]
+
+EPS = 1e-6
+
+
+@dataclass
+class StepState:
+    """A plan step and how it is doing."""
+
+    plan_id: str
+    step: PlanStep
+    status: str = "waiting"
+    reason: str = ""
+    request_id: str = ""
+
+
+@dataclass
+class Effects:
+    """What the service must send after a call: world requests, status reports, an arrest."""
+
+    requests: list[ActionRequest] = field(default_factory=list)
+    statuses: list[ActionStatus] = field(default_factory=list)
+    arrest: ArrestReport | None = None
+
+
+class Dispatcher:
+    """Dispatch one agent's plan steps in time."""
+
+    def __init__(self, agent: str) -> None:
+        self.agent = agent
+        self.plan_id = ""
+        self.steps: list[StepState] = []
+        self.arrest: tuple[str, str] | None = None  # (plan id, last step allowed to start)
+        self._requests = 0
+
+    # -- plans ---------------------------------------------------------------------------
+    def load(self, plan: PartialPlan, now: float) -> Effects:
+        """Queue a plan: more of the current one, or a replacement (new baseline)."""
+        out = Effects()
+        continues = plan.plan_id == self.plan_id or (
+            plan.baseline and plan.baseline == self.plan_id
+        )
+        if not continues:
+            for s in self.steps:
+                if s.status == "waiting":
+                    self._set(s, "cancelled", f"replaced by plan {plan.plan_id}", now, out)
+            self.steps = [s for s in self.steps if s.status == "running"]
+            self.arrest = None
+        known = {s.step.step_id for s in self.steps}
+        for step in sorted(plan.steps, key=lambda st: st.start):
+            if step.step_id not in known:
+                state = StepState(plan.plan_id, step)
+                self.steps.append(state)
+                self._report(state, now, out)
+        self.plan_id = plan.plan_id
+        return out
+
+    def running(self) -> StepState | None:
+        return next((s for s in self.steps if s.status == "running"), None)
+
+    # -- time ----------------------------------------------------------------------------
+    def tick(self, now: float, beliefs: BeliefSet) -> Effects:
+        """Start the next due step if nothing runs; report over-all violations."""
+        out = Effects()
+        current = self.running()
+        if current is not None:
+            broken = first_failing(current.step.over_all, beliefs)
+            if broken is not None:
+                current.reason = f"over all condition {describe(broken)} does not hold"
+                self._report(current, now, out)
+            return out
+        step = next((s for s in self.steps if s.status == "waiting"), None)
+        if step is None or step.step.start > now + EPS or self._arrested(step):
+            return out
+        self._start(step, now, beliefs, out)
+        return out
+
+    def _arrested(self, state: StepState) -> bool:
+        if self.arrest is None or self.arrest[0] != state.plan_id:
+            return False
+        ids = [s.step.step_id for s in self.steps if s.plan_id == state.plan_id]
+        last = self.arrest[1]
+        return last in ids and ids.index(state.step.step_id) > ids.index(last)
+
+    def _start(self, state: StepState, now: float, beliefs: BeliefSet, out: Effects) -> None:
+        broken = first_failing(state.step.at_start, beliefs)
+        if broken is not None:
+            self._set(
+                state, "refused", f"at start condition {describe(broken)} does not hold", now, out
+            )
+            self._abandon(now, out)
+            return
+        self._requests += 1
+        try:
+            request = to_request(self.agent, state.step, f"{self.agent}-{self._requests}")
+        except UnboundActionError as exc:
+            self._set(state, "refused", str(exc), now, out)
+            self._abandon(now, out)
+            return
+        state.request_id = request.request_id
+        self._set(state, "running", "", now, out)
+        out.requests.append(request)
+
+    # -- the world's answers -------------------------------------------------------------
+    def on_reply(self, reply: ActionReply, now: float) -> Effects:
+        """Follow the world's immediate answer to a request."""
+        out = Effects()
+        state = self._by_request(reply.request_id)
+        if state is not None and not reply.accepted:
+            self._set(state, "failed", f"rejected by the world: {reply.reason}", now, out)
+            self._abandon(now, out)
+            self._maybe_report_arrest(now, out)
+        return out
+
+    def on_outcome(self, outcome: ActionOutcome, now: float) -> Effects:
+        """Follow how an action ended."""
+        out = Effects()
+        state = self._by_request(outcome.request_id)
+        if state is None or state.status != "running":
+            return out
+        if outcome.status == "succeeded":
+            self._set(state, "succeeded", "", now, out)
+        else:
+            self._set(state, "failed", outcome.reason, now, out)
+            self._abandon(now, out)
+        self._maybe_report_arrest(now, out)
+        return out
+
+    # -- early arrest ----------------------------------------------------------------------
+    def early_arrest(self, plan_id: str, after_step: str, now: float) -> Effects:
+        """Start nothing after `after_step`; report once nothing runs any more."""
+        out = Effects()
+        if plan_id != self.plan_id:
+            return out
+        self.arrest = (plan_id, after_step)
+        self._maybe_report_arrest(now, out)
+        return out
+
+    def _maybe_report_arrest(self, now: float, out: Effects) -> None:
+        if self.arrest is None or self.running() is not None:
+            return
+        plan_id, last = self.arrest
+        started = [s for s in self.steps if s.plan_id == plan_id and s.status != "waiting"]
+        if any(s.status == "waiting" and not self._arrested(s) for s in self.steps):
+            return  # steps up to `last` still have to run
+        cancelled = []
+        for s in self.steps:
+            if s.status == "waiting" and self._arrested(s):
+                self._set(s, "cancelled", f"early arrest after {last}", now, out)
+                cancelled.append(s.step.step_id)
+        done = started[-1].step.step_id if started else ""
+        out.arrest = ArrestReport(
+            agent=self.agent, plan_id=plan_id, last_step=done, time=now, cancelled=cancelled
+        )
+        self.arrest = None
+
+    # -- helpers ---------------------------------------------------------------------------
+    def _abandon(self, now: float, out: Effects) -> None:
+        for s in self.steps:
+            if s.status == "waiting":
+                self._set(s, "cancelled", "an earlier step of the plan did not succeed", now, out)
+
+    def _by_request(self, request_id: str) -> StepState | None:
+        return next((s for s in self.steps if s.request_id == request_id), None)
+
+    def _set(self, state: StepState, status: str, reason: str, now: float, out: Effects) -> None:
+        state.status, state.reason = status, reason
+        self._report(state, now, out)
+
+    def _report(self, state: StepState, now: float, out: Effects) -> None:
+        out.statuses.append(
+            ActionStatus(
+                agent=self.agent,
+                plan_id=state.plan_id,
+                step_id=state.step.step_id,
+                action=state.step.action,
+                status=state.status,
+                reason=state.reason,
+                time=now,
+            )
+        )

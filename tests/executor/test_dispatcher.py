@@ -1,0 +1,177 @@
+"""The executor's dispatcher: timing, condition checks, world answers, plans, early arrest."""
+
+from __future__ import annotations
+
+import pytest
+
+from cbdi.beliefs import BeliefSet, fact, fluent
+from cbdi.wire.agent import Check, PartialPlan, PlanStep
+from cbdi.wire.world import ActionOutcome, ActionReply
+from cbdi_executor.binding import UnboundActionError, cell_of, to_request
+from cbdi_executor.checks import describe, first_failing
+from cbdi_executor.dispatcher import Dispatcher, Effects
+
+FREE = BeliefSet.of(
+    [fact("free", f"c_{x}_0") for x in range(1, 5)]
+    + [fact("in", "r", "c_0_0"), fluent("loaded_amount", "r", value=0)]
+)
+
+
+def move(i: int, start: float, checks: bool = True) -> PlanStep:
+    at_start = [Check(atom=["free", f"c_{i + 1}_0"])] if checks else []
+    return PlanStep(
+        step_id=f"s{i}",
+        action="move",
+        args=["r", f"c_{i}_0", f"c_{i + 1}_0"],
+        start=start,
+        duration=1.0,
+        at_start=at_start,
+        over_all=[Check(atom=["free", f"c_{i + 1}_0"])],
+    )
+
+
+def plan(plan_id: str, *steps: PlanStep, baseline: str = "") -> PartialPlan:
+    return PartialPlan(agent="r", plan_id=plan_id, baseline=baseline, steps=list(steps))
+
+
+def statuses(out: Effects) -> list[tuple[str, str]]:
+    return [(s.step_id, s.status) for s in out.statuses]
+
+
+def finish(d: Dispatcher, out: Effects, now: float, ok: bool = True) -> Effects:
+    req = out.requests[0]
+    d.on_reply(ActionReply(request_id=req.request_id, accepted=True), now)
+    return d.on_outcome(
+        ActionOutcome(
+            agent="r",
+            request_id=req.request_id,
+            action=req.action,
+            status="succeeded" if ok else "failed",
+            reason="" if ok else "blocked by person p",
+            epoch=int(now),
+            time=now,
+        ),
+        now,
+    )
+
+
+def test_steps_start_at_their_time_one_at_a_time() -> None:
+    d = Dispatcher("r")
+    assert statuses(d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)) == [
+        ("s0", "waiting"),
+        ("s1", "waiting"),
+    ]
+    first = d.tick(0.0, FREE)
+    assert first.requests[0].target == (1, 0) and statuses(first) == [("s0", "running")]
+    assert d.tick(1.0, FREE).requests == []  # s0 still running: s1 waits
+    assert statuses(finish(d, first, 1.0)) == [("s0", "succeeded")]
+    second = d.tick(1.0, FREE)
+    assert second.requests[0].target == (2, 0)
+
+
+def test_not_before_its_time() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 2.0)), 0)
+    assert d.tick(1.0, FREE).requests == []
+    assert len(d.tick(2.0, FREE).requests) == 1
+
+
+def test_inapplicable_step_is_refused_and_the_plan_ends() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
+    blocked = FREE.removing([fact("free", "c_1_0")])
+    out = d.tick(0.0, blocked)
+    assert out.requests == []
+    assert statuses(out) == [("s0", "refused"), ("s1", "cancelled")]
+    assert "(free c_1_0) does not hold" in out.statuses[0].reason
+
+
+def test_failed_or_rejected_action_cancels_the_rest() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
+    out = finish(d, d.tick(0.0, FREE), 1.0, ok=False)
+    assert statuses(out) == [("s0", "failed"), ("s1", "cancelled")]
+    assert out.statuses[0].reason == "blocked by person p"
+    d2 = Dispatcher("r")
+    d2.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
+    req = d2.tick(0.0, FREE).requests[0]
+    rejected = d2.on_reply(
+        ActionReply(request_id=req.request_id, accepted=False, reason="busy"), 0.0
+    )
+    assert statuses(rejected) == [("s0", "failed"), ("s1", "cancelled")]
+
+
+def test_over_all_violation_is_reported_while_running() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0)), 0)
+    d.tick(0.0, FREE)
+    out = d.tick(0.5, FREE.removing([fact("free", "c_1_0")]))
+    assert statuses(out) == [("s0", "running")]
+    assert "over all condition (free c_1_0)" in out.statuses[0].reason
+
+
+def test_continuation_appends_and_new_baseline_replaces() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0)), 0)
+    more = d.load(plan("p2", move(1, 1.0), baseline="p"), 0)
+    assert statuses(more) == [("s1", "waiting")] and len(d.steps) == 2
+    running = d.tick(0.0, FREE)
+    swap = d.load(plan("q", move(5, 3.0)), 0.5)  # a repair: replaces what waits
+    assert ("s1", "cancelled") in statuses(swap) and ("s5", "waiting") in statuses(swap)
+    assert [s.step.step_id for s in d.steps] == ["s0", "s5"]  # the running step stays
+    assert finish(d, running, 1.0).statuses[0].status == "succeeded"
+
+
+def test_early_arrest_lets_the_started_step_finish_and_starts_nothing_after() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0), move(2, 2.0)), 0)
+    first = d.tick(0.0, FREE)
+    assert d.early_arrest("p", "s0", 0.5).arrest is None  # s0 still runs
+    done = finish(d, first, 1.0)
+    assert done.arrest is not None
+    assert done.arrest.last_step == "s0" and done.arrest.cancelled == ["s1", "s2"]
+    assert d.tick(2.0, FREE).requests == []
+
+
+def test_early_arrest_waits_for_steps_up_to_the_arrest_point() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0), move(2, 2.0)), 0)
+    assert d.early_arrest("p", "s1", 0.0).arrest is None
+    out = finish(d, d.tick(0.0, FREE), 1.0)
+    assert out.arrest is None  # s1 may still start
+    out = finish(d, d.tick(1.0, FREE), 2.0)
+    assert out.arrest is not None and out.arrest.last_step == "s1"
+    assert out.arrest.cancelled == ["s2"]
+    assert d.early_arrest("other", "s0", 2.0).arrest is None  # not the current plan
+
+
+def test_checks_and_bindings() -> None:
+    beliefs = FREE
+    assert first_failing([Check(atom=["loaded_amount", "r"], op="LT", value=3)], beliefs) is None
+    bad = Check(atom=["loaded_amount", "r"], op="GE", value=3)
+    assert first_failing([bad], beliefs) == bad and describe(bad) == "(>= (loaded_amount r) 3)"
+    assert describe(Check(atom=["free", "c"], op="F")) == "(not (free c))"
+    assert cell_of("c_12_3") == (12, 3)
+    pick = PlanStep(
+        step_id="x", action="litter_pickup", args=["r", "pla61", "c_6_1"], start=0, duration=3
+    )
+    assert to_request("r", pick, "1").item == "pla61"
+    recycle = PlanStep(
+        step_id="y",
+        action="recycle_plastic",
+        args=["r", "pla61", "bin", "c_0_1", "c_0_0"],
+        start=0,
+        duration=3,
+    )
+    assert to_request("r", recycle, "2").action == "recycle"
+    with pytest.raises(UnboundActionError, match="no action for 'fly'"):
+        to_request("r", PlanStep(step_id="z", action="fly", args=[], start=0, duration=1), "3")
+    with pytest.raises(UnboundActionError, match="not a cell"):
+        cell_of("kitchen")
+
+
+def test_an_unbound_action_is_refused_not_crashed() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", PlanStep(step_id="z", action="fly", args=["r"], start=0, duration=1)), 0)
+    out = d.tick(0.0, FREE)
+    assert statuses(out) == [("z", "refused")] and "no action" in out.statuses[0].reason
