@@ -50,4 +50,4 @@ def json_schema(name: str) -> bytes:
     return json.dumps(msgspec.json.schema(cls)).encode()
 
 
-assert cbdi.wire.common  # keep the import for its side effect
+assert cbdi.wire.common and cbdi.wire.agent  # keep the imports for their side effect
