@@ -7,6 +7,7 @@ from functools import cache
 
 import msgspec
 
+import cbdi.wire.agent
 import cbdi.wire.common
 import cbdi.wire.world
 from cbdi.wire.base import Message, schema_of
@@ -50,4 +51,5 @@ def json_schema(name: str) -> bytes:
     return json.dumps(msgspec.json.schema(cls)).encode()
 
 
-assert cbdi.wire.common and cbdi.wire.agent  # keep the imports for their side effect
+# Imported for their side effect: every message class is then a known subclass.
+_MODULES = (cbdi.wire.agent, cbdi.wire.common, cbdi.wire.world)
