@@ -137,3 +137,42 @@ def test_broken_map_fails_the_run_at_once_with_the_map_error(tmp_path: Path) -> 
     assert result.returncode == 1 and summary["result"] == "failed"
     assert "grid row 1 column 1: unknown cell 'x'" in summary["reason"]
     assert summary["restarts"]["world"] == 0  # a bad map is not retried
+
+
+def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> None:
+    rec = tmp_path / "k2.mcap"
+    result = up(
+        "paper-7x7",
+        "--speed",
+        "40",
+        "--move-step",
+        "8",
+        "--det-area",
+        "2",
+        "--known-litter",
+        "2",
+        "--json",
+        "--quiet",
+        "--record",
+        str(rec),
+    )
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["stats"]["litter_recycled"] == 3  # the third one found
+    from cbdi.wire import decode
+    from cbdi.wire.world import Percepts, WorldInfo
+    from cbdi_monitor.reader import read_messages
+
+    info = next(decode(m.payload, WorldInfo) for m in read_messages(rec, ["cbdi/world/info"]))
+    assert info.detection_depth == {"robot1": 2}
+    first = next(
+        decode(m.payload, Percepts) for m in read_messages(rec, ["cbdi/world/percepts/robot1"])
+    )
+    assert first.depth == 2
+    from cbdi.wire.world import WorldSnapshot
+
+    person1 = [
+        decode(m.payload, WorldSnapshot).people[0].cell
+        for m in read_messages(rec, ["cbdi/world/snapshot"])
+    ][:17]
+    moves_at = [i for i in range(1, len(person1)) if person1[i] != person1[i - 1]]
+    assert moves_at[:2] == [8, 16]  # one step every 8 epochs

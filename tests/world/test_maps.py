@@ -89,3 +89,16 @@ def test_map_errors_name_the_field(text: str, field: str, reason: str) -> None:
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(MapError, match="not found"):
         load_map(tmp_path / "none.toml")
+
+
+def test_situation_overrides_people_depth_and_known_litter() -> None:
+    from cbdi_world.maps import with_situation
+
+    m = load_map(MAPS / "paper-7x7.toml")
+    s = with_situation(m, move_step=8, detection_depth=3, known_litter=2)
+    assert [p.move_step for p in s.people] == [8, 8] and s.detection_depth == 3
+    known = sorted(n for n, (_, k) in s.litter.items() if k)
+    assert known == ["plastic_3_6", "plastic_6_1"]  # the first two in reading order
+    assert with_situation(m) == m  # defaults keep the map as it is
+    with pytest.raises(MapError, match="known_litter"):
+        with_situation(m, known_litter=4)

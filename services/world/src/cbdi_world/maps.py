@@ -14,14 +14,21 @@ naming the file, the field (`grid row 3 column 5`, `people[1].path[4]`) and the 
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from cbdi.wire.world import Cell
 from cbdi_world.errors import MapError
 
-__all__ = ["DEFAULT_DURATIONS", "PersonSpec", "WorldMap", "load_map", "parse_map"]
+__all__ = [
+    "DEFAULT_DURATIONS",
+    "PersonSpec",
+    "WorldMap",
+    "load_map",
+    "parse_map",
+    "with_situation",
+]
 
 DEFAULT_DURATIONS = {"move": 1.0, "pickup": 3.0, "recycle": 3.0}
 _LEGEND = {".", "#", "B", "A", "L", "l"}
@@ -246,3 +253,34 @@ class _Reader:
 
 def _adjacent(a: Cell, b: Cell) -> bool:
     return abs(a[0] - b[0]) + abs(a[1] - b[1]) == 1
+
+
+def with_situation(
+    world_map: WorldMap,
+    *,
+    move_step: int = 0,
+    detection_depth: int = -1,
+    known_litter: int = -1,
+) -> WorldMap:
+    """Return the map set up for one of the paper's situations (0 / -1: keep the map's).
+
+    `move_step` for every person, the agents' `detection_depth`, and how many litter
+    items (the first ones in reading order) agents know at the start.
+    """
+    if move_step < 0:
+        raise MapError(world_map.source, "move_step", f"must be >= 1, got {move_step}")
+    people = world_map.people
+    if move_step:
+        people = tuple(replace(p, move_step=move_step) for p in people)
+    depth = world_map.detection_depth if detection_depth < 0 else detection_depth
+    litter = world_map.litter
+    if known_litter >= 0:
+        if known_litter > len(litter):
+            raise MapError(
+                world_map.source,
+                "known_litter",
+                f"{known_litter} known items but the map has {len(litter)}",
+            )
+        order = sorted(litter, key=lambda n: (litter[n][0][1], litter[n][0][0]))
+        litter = {n: (litter[n][0], i < known_litter) for i, n in enumerate(order)}
+    return replace(world_map, people=people, detection_depth=depth, litter=litter)

@@ -28,7 +28,7 @@ from cbdi.wire.world import (
     WorldInfoRequest,
 )
 from cbdi_world.errors import UnknownAgentError, WorldError
-from cbdi_world.maps import load_map
+from cbdi_world.maps import load_map, with_situation
 from cbdi_world.world import AgentSpec, EpochResult, World
 
 __all__ = ["WorldService", "WorldSettings", "agent_specs", "build_world", "world_main"]
@@ -52,6 +52,11 @@ class WorldSettings(ServiceSettings):
     )
     ack_timeout: float = field(default=30.0, metadata={"help": "lockstep: seconds per ack wait"})
     stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
+    move_step: int = field(default=0, metadata={"help": "people step every N epochs (0: map's)"})
+    det_area: int = field(default=-1, metadata={"help": "agents' detection depth (-1: map's)"})
+    known_litter: int = field(
+        default=-1, metadata={"help": "litter items known at start, first in reading order"}
+    )
 
 
 def agent_specs(
@@ -219,7 +224,12 @@ def build_world(settings: WorldSettings) -> World:
     """Load the map and place the agents; raise a CbdiError/WorldError naming what is wrong."""
     if not settings.map:
         raise WorldError("no map given (--map FILE)")
-    world_map = load_map(settings.map)
+    world_map = with_situation(
+        load_map(settings.map),
+        move_step=settings.move_step,
+        detection_depth=settings.det_area,
+        known_litter=settings.known_litter,
+    )
     agents = settings.agent or ("robot1",)
     specs = agent_specs(agents, world_map.agent_starts, world_map.detection_depth)
     return World(world_map, specs, seed=settings.seed)

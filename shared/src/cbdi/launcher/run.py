@@ -85,8 +85,11 @@ def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessS
     else:
         world_args += ["--max-time", run.until, "--no-stop-when-done"]
     world_args += ["--lockstep" if run.lockstep else "--no-lockstep"]
+    world_args += ["--move-step", str(run.move_step), "--det-area", str(run.det_area)]
+    world_args += ["--known-litter", str(run.known_litter)]
     for agent in scenario.agents:
-        depth = f":{agent.detection_depth}" if agent.detection_depth is not None else ""
+        own = agent.detection_depth is not None and run.det_area < 0
+        depth = f":{agent.detection_depth}" if own else ""
         world_args += ["--agent", f"{agent.name}{depth}"]
     monitor = []
     if record:
@@ -119,6 +122,8 @@ def _agent_spec(
             name,
             "--map",
             str(scenario.map_path),
+            "--known-litter",
+            str(scenario.run.known_litter),
         )
         return ProcessSpec(keys.service_id(component, name), argv, env)
     raise CbdiError(f"agent kind {kind!r} has no services")

@@ -10,6 +10,9 @@ A scenario lives in `domains/recycling/scenarios/<name>.toml`:
     until = "done"       # or a number of simulated seconds
     max_time = 600.0     # simulated seconds after which a "done" run gives up
     lockstep = false
+    move_step = 4        # the paper's situation: people's pace, detection depth,
+    det_area = 1         #   and how many litter items are known at the start
+    known_litter = 2
     [[agents]]
     name = "robot1"
     kind = "scripted"    # which services make up the agent
@@ -52,6 +55,9 @@ class RunSettings:
     until: str = "done"
     max_time: float = 600.0
     lockstep: bool = False
+    move_step: int = 0  # people step every N epochs (0: the map's)
+    det_area: int = -1  # the agents' detection depth (-1: the map's or the agent's)
+    known_litter: int = -1  # litter items known at the start (-1: the map's)
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from cbdi.runtime.service import ServiceMain
 from cbdi.wire.base import decode_any
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, EpochAck, Percepts
 from cbdi_world.errors import WorldError
-from cbdi_world.maps import WorldMap, load_map
+from cbdi_world.maps import WorldMap, load_map, with_situation
 from cbdi_world.scripted.policy import Beliefs, Step, greedy_step, parse_script
 
 __all__ = ["ScriptedSettings", "main"]
@@ -36,6 +36,9 @@ class ScriptedSettings(ServiceSettings):
         default="", metadata={"help": "steps 'move:X,Y pickup recycle ...'; empty: greedy"}
     )
     retries: int = field(default=20, metadata={"help": "script mode: tries per step"})
+    known_litter: int = field(
+        default=-1, metadata={"help": "litter items known at start (as given to the world)"}
+    )
 
 
 class ScriptedAgent:
@@ -163,7 +166,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             description=__doc__ or "",
         )
         keys.validate_name(settings.agent)
-        beliefs = _beliefs(load_map(settings.map))
+        world_map = with_situation(load_map(settings.map), known_litter=settings.known_litter)
+        beliefs = _beliefs(world_map)
         script = parse_script(settings.script) if settings.script else None
     except (ConfigError, WorldError, ValueError) as exc:
         print(f"cbdi-scripted-agent: {exc}", file=sys.stderr)
