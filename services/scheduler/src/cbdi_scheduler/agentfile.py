@@ -1,0 +1,226 @@
+"""Agent files: one TOML file describes a kind of agent (format in docs/agents.md).
+
+`{self}` anywhere stands for the agent's own name, given when the agent is started, so
+one file serves several robots. Every mistake is an `AgentFileError` naming the file,
+the field (`rules[0].then[1].boost.goal[0]`) and what is wrong.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from cbdi.beliefs import Belief
+from cbdi.errors import CbdiError
+from cbdi_scheduler.conditions import Condition
+from cbdi_scheduler.desires import NO_DEADLINE, Desire
+from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
+from cbdi_scheduler.rules import ReactiveRule, RuleEffect
+
+__all__ = ["AgentFile", "AgentFileError", "PlanningSettings", "load_agent", "parse_agent"]
+
+PREEMPTION = ("no_preempt", "preempt", "clean_preempt")
+MODES = ("online", "offline")
+
+
+class AgentFileError(CbdiError):
+    """Reject an agent file, naming the file, the field and the reason."""
+
+    code = "bad_agent_file"
+
+    def __init__(self, path: str, field_name: str, reason: str) -> None:
+        self.path, self.field, self.reason = path, field_name, reason
+        super().__init__(f"{path}: {field_name}: {reason}")
+
+
+@dataclass(frozen=True)
+class PlanningSettings:
+    """How the agent's planner searches (the continual planner's parameters)."""
+
+    mode: str = "online"
+    round_interval: float = 0.5
+    expansions_per_round: int = 200
+    plan_size_limit: int = 8
+    min_commit_steps: int = 1
+    forecast_horizon: int = 0
+    empty_rounds: int = 10
+    backend: str = "cbdi"
+
+
+@dataclass(frozen=True)
+class AgentFile:
+    """A loaded agent file, for one named agent."""
+
+    agent: str
+    source: str
+    domain: Path
+    group: str = ""
+    allowed_groups: tuple[str, ...] = ()
+    detection_depth: int | None = None
+    preemption: str = "clean_preempt"
+    plan_retries: int = 3
+    exec_retries: int = 3
+    beliefs: tuple[Belief, ...] = ()
+    desires: tuple[Desire, ...] = ()
+    rules: tuple[ReactiveRule, ...] = ()
+    planning: PlanningSettings = field(default_factory=PlanningSettings)
+
+
+def load_agent(path: str | Path, agent: str) -> AgentFile:
+    """Read the agent file at `path` for the agent named `agent`."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise AgentFileError(str(p), "file", exc.strerror or str(exc)) from None
+    return parse_agent(text.replace("{self}", agent), str(p), agent, p.parent)
+
+
+def parse_agent(text: str, source: str, agent: str, base: Path) -> AgentFile:
+    """Validate agent-file `text` (with `{self}` already replaced)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise AgentFileError(source, "toml", str(exc)) from None
+    r = _Reader(source, data)
+    domain = base / r.get(data, "domain", str, "domain")
+    if not domain.is_file():
+        raise AgentFileError(source, "domain", f"no such file {domain}")
+    bdi = r.table(data, "scheduler")
+    preemption = r.choice(bdi, "preemption", PREEMPTION, "clean_preempt", "scheduler")
+    return AgentFile(
+        agent=agent,
+        source=source,
+        domain=domain,
+        group=r.opt(data, "group", str, ""),
+        allowed_groups=tuple(r.opt(data, "allowed_groups", list, [])),
+        detection_depth=r.opt(data, "detection_depth", int, None),
+        preemption=preemption,
+        plan_retries=r.opt(bdi, "plan_retries", int, 3, "scheduler"),
+        exec_retries=r.opt(bdi, "exec_retries", int, 3, "scheduler"),
+        beliefs=tuple(
+            r.belief(b, f"beliefs[{i}]") for i, b in enumerate(r.opt(data, "beliefs", list, []))
+        ),
+        desires=tuple(
+            r.desire(d, f"desires[{i}]") for i, d in enumerate(r.opt(data, "desires", list, []))
+        ),
+        rules=tuple(r.rule(x, f"rules[{i}]") for i, x in enumerate(r.opt(data, "rules", list, []))),
+        planning=r.planning(r.table(data, "planning")),
+    )
+
+
+class _Reader:
+    """Typed access to the raw TOML, with errors that name the field."""
+
+    def __init__(self, source: str, data: dict[str, Any]) -> None:
+        self.source, self.data = source, data
+
+    def fail(self, where: str, reason: str) -> AgentFileError:
+        return AgentFileError(self.source, where, reason)
+
+    def get(self, table: dict[str, Any], key: str, tp: type, where: str) -> Any:
+        if key not in table:
+            raise self.fail(where, "missing")
+        return self.check(table[key], tp, where)
+
+    def opt(self, table: dict[str, Any], key: str, tp: type, default: Any, prefix: str = "") -> Any:
+        where = f"{prefix}.{key}" if prefix else key
+        return self.check(table[key], tp, where) if key in table else default
+
+    def check(self, value: Any, tp: type, where: str) -> Any:
+        if tp is float and isinstance(value, int) and not isinstance(value, bool):
+            return float(value)
+        if not isinstance(value, tp) or (tp is int and isinstance(value, bool)):
+            raise self.fail(where, f"expected {tp.__name__}, got {type(value).__name__}")
+        return value
+
+    def table(self, data: dict[str, Any], key: str) -> dict[str, Any]:
+        return self.opt(data, key, dict, {})
+
+    def choice(
+        self, table: dict[str, Any], key: str, options: tuple[str, ...], default: str, prefix: str
+    ) -> str:
+        value = self.opt(table, key, str, default, prefix)
+        if value not in options:
+            raise self.fail(f"{prefix}.{key}", f"expected one of {', '.join(options)}")
+        return str(value)
+
+    def belief(self, text: Any, where: str) -> Belief:
+        try:
+            return parse_belief(self.check(text, str, where))
+        except (LiteralSyntaxError, ValueError) as exc:
+            raise self.fail(where, str(exc)) from None
+
+    def condition(self, raw: Any, where: str) -> Condition:
+        clauses = self.check(raw, list, where)
+        out = []
+        for i, clause in enumerate(clauses):
+            texts = self.check(clause, list, f"{where}[{i}]")
+            try:
+                out.append(
+                    tuple(
+                        parse_literal(self.check(t, str, f"{where}[{i}][{j}]"))
+                        for j, t in enumerate(texts)
+                    )
+                )
+            except (LiteralSyntaxError, ValueError) as exc:
+                raise self.fail(f"{where}[{i}]", str(exc)) from None
+        return tuple(out)
+
+    def desire(self, raw: Any, where: str) -> Desire:
+        d = self.check(raw, dict, where)
+        goal = tuple(
+            self.belief(g, f"{where}.goal[{i}]")
+            for i, g in enumerate(self.get(d, "goal", list, f"{where}.goal"))
+        )
+        return Desire(
+            name=self.get(d, "name", str, f"{where}.name"),
+            goal=goal,
+            priority=self.opt(d, "priority", float, 0.5, where),
+            deadline=self.opt(d, "deadline", float, NO_DEADLINE, where),
+            precondition=self.condition(d.get("precondition", []), f"{where}.precondition"),
+            context=self.condition(d.get("context", []), f"{where}.context"),
+        )
+
+    def rule(self, raw: Any, where: str) -> ReactiveRule:
+        r = self.check(raw, dict, where)
+        effects = tuple(
+            self.effect(e, f"{where}.then[{i}]")
+            for i, e in enumerate(self.get(r, "then", list, f"{where}.then"))
+        )
+        return ReactiveRule(
+            condition=self.condition(self.get(r, "when", list, f"{where}.when"), f"{where}.when"),
+            effects=effects,
+            name=self.opt(r, "name", str, "", where),
+        )
+
+    def effect(self, raw: Any, where: str) -> RuleEffect:
+        e = self.check(raw, dict, where)
+        if len(e) != 1:
+            raise self.fail(where, "one of add_belief, del_belief, add_desire, del_desire, boost")
+        ((kind, value),) = e.items()
+        if kind in ("add_belief", "del_belief"):
+            op = "ADD" if kind == "add_belief" else "DEL"
+            return RuleEffect("belief", op, belief=self.belief(value, f"{where}.{kind}"))
+        if kind in ("add_desire", "boost"):
+            op = "ADD" if kind == "add_desire" else "BOOST"
+            return RuleEffect("desire", op, desire=self.desire(value, f"{where}.{kind}"))
+        if kind == "del_desire":
+            name = self.check(value, str, f"{where}.del_desire")
+            return RuleEffect("desire", "DEL", desire=Desire(name=name, goal=()))
+        raise self.fail(where, f"unknown effect {kind!r}")
+
+    def planning(self, table: dict[str, Any]) -> PlanningSettings:
+        known = {f.name: f for f in fields(PlanningSettings)}
+        values: dict[str, Any] = {}
+        for key, value in table.items():
+            if key not in known:
+                raise self.fail(f"planning.{key}", f"unknown setting (known: {', '.join(known)})")
+            default = getattr(PlanningSettings(), key)
+            values[key] = self.check(value, type(default), f"planning.{key}")
+        settings = PlanningSettings(**values)
+        if settings.mode not in MODES:
+            raise self.fail("planning.mode", f"expected one of {', '.join(MODES)}")
+        return settings

@@ -1,0 +1,93 @@
+"""Read beliefs and condition literals written the PDDL way, as agent files do.
+
+(map_loaded)                     a predicate belief, or a `T` check
+(not (holding {self} *))         an `F` check
+(exists {x} - plastic)           an `EX` check;   `pla61 - plastic`  an instance belief
+(= (loaded_amount {self}) 0)     a function belief, or an `EQ` check
+(< (loaded_amount {self}) 3)     numeric checks: < <= > >= = !=
+"""
+
+from __future__ import annotations
+
+import re
+
+from cbdi.beliefs import Belief, fact, fluent, instance
+from cbdi_scheduler.conditions import Literal
+
+__all__ = ["LiteralSyntaxError", "parse_belief", "parse_literal"]
+
+_TOKEN = re.compile(r"\(|\)|[^\s()]+")
+_OPS = {"=": "EQ", "!=": "NE", "<": "LT", "<=": "LE", ">": "GT", ">=": "GE"}
+Tree = str | list["Tree"]
+
+
+class LiteralSyntaxError(ValueError):
+    """A belief or literal that does not read; the message says what was expected."""
+
+
+def _tree(text: str) -> Tree:
+    tokens = _TOKEN.findall(text)
+    if not tokens:
+        raise LiteralSyntaxError(f"{text!r}: empty")
+    stack: list[list[Tree]] = [[]]
+    for tok in tokens:
+        if tok == "(":
+            stack.append([])
+        elif tok == ")":
+            if len(stack) == 1:
+                raise LiteralSyntaxError(f"{text!r}: unbalanced ')'")
+            done = stack.pop()
+            stack[-1].append(done)
+        else:
+            stack[-1].append(tok)
+    if len(stack) != 1:
+        raise LiteralSyntaxError(f"{text!r}: missing ')'")
+    top = stack[0]
+    return top[0] if len(top) == 1 else top
+
+
+def _atom(tree: Tree, text: str) -> tuple[str, tuple[str, ...]]:
+    if not isinstance(tree, list) or not tree or not all(isinstance(t, str) for t in tree):
+        raise LiteralSyntaxError(f"{text!r}: expected an atom like (name arg ...)")
+    return str(tree[0]), tuple(str(t) for t in tree[1:])
+
+
+def _number(tok: Tree, text: str) -> float:
+    try:
+        return float(str(tok))
+    except ValueError:
+        raise LiteralSyntaxError(f"{text!r}: expected a number, got {tok!r}") from None
+
+
+def parse_belief(text: str) -> Belief:
+    """Read one belief: `(pred a b)`, `(= (func a) 3)` or `name - type`."""
+    tree = _tree(text)
+    if (
+        isinstance(tree, list)
+        and len(tree) == 3
+        and tree[1] == "-"
+        and all(isinstance(t, str) for t in tree)
+    ):
+        return instance(str(tree[0]), str(tree[2]))
+    if isinstance(tree, list) and tree and tree[0] == "=" and len(tree) == 3:
+        name, args = _atom(tree[1], text)
+        return fluent(name, *args, value=_number(tree[2], text))
+    name, args = _atom(tree, text)
+    return fact(name, *args)
+
+
+def parse_literal(text: str) -> Literal:
+    """Read one condition literal (see the module docstring for the forms)."""
+    tree = _tree(text)
+    if isinstance(tree, list) and tree and tree[0] == "not" and len(tree) == 2:
+        name, args = _atom(tree[1], text)
+        return Literal("F", fact(name, *args))
+    if isinstance(tree, list) and tree and tree[0] == "exists":
+        if len(tree) != 4 or tree[2] != "-" or not all(isinstance(t, str) for t in tree[1:]):
+            raise LiteralSyntaxError(f"{text!r}: expected (exists NAME - TYPE)")
+        return Literal("EX", instance(str(tree[1]), str(tree[3])))
+    if isinstance(tree, list) and tree and tree[0] in _OPS and len(tree) == 3:
+        name, args = _atom(tree[1], text)
+        return Literal(_OPS[str(tree[0])], fluent(name, *args, value=0.0), _number(tree[2], text))
+    name, args = _atom(tree, text)
+    return Literal("T", fact(name, *args))
