@@ -49,13 +49,19 @@ class PlanStep(Message, frozen=True, tag="cbdi.agent.PlanStep/1"):
 
 
 class PartialPlan(Message, frozen=True, tag="cbdi.agent.PartialPlan/1"):
-    """Steps to execute: a new plan, or more of (or a repair after) the plan `baseline`."""
+    """Steps to execute: a new plan, or more of (or a repair after) the plan `baseline`.
+
+    A plan whose baseline is not the executing plan replaces it: the executor finishes
+    the executing plan up to step `applies_after` (empty: the step running now) and then
+    runs this one.
+    """
 
     agent: str
     plan_id: str
     baseline: str
     steps: list[PlanStep]
     complete: bool = False
+    applies_after: str = ""
 
 
 class ActionStatus(Message, frozen=True, tag="cbdi.agent.ActionStatus/1"):

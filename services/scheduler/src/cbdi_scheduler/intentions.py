@@ -1,0 +1,197 @@
+"""The intention scheduler: from the chosen desire to plans executing, safely.
+
+It is a pure state machine. Its inputs are what happens (a desire chosen, a partial plan
+from the planner, the planner giving up, a step failing, the executor stopping after an
+early arrest, time passing); its outputs are `Command`s for the service to send (start or
+cancel a search, pass a plan to the executor, ask for an early arrest, drop a desire).
+
+- A plan continuing the one executing (its baseline is the current plan) is passed on.
+- A plan with another baseline (a repair or an improvement) replaces the queue: the
+  executor is asked to stop after the last step the new plan keeps (its prefix), and the
+  new plan is passed on once the executor reports it stopped.
+- A higher-priority desire under `no_preempt` waits until the intention ends; under
+  `preempt` the executor stops after the running step and the new desire starts at once;
+  under `clean_preempt` the new desire starts only once the executor reported it stopped.
+- Planning and execution failures are retried up to their limits, then the desire is
+  dropped with the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan
+from cbdi_scheduler.desires import Desire
+
+__all__ = ["Command", "IntentionScheduler"]
+
+
+@dataclass(frozen=True)
+class Command:
+    """Something the service must do: `kind` and what it needs."""
+
+    kind: str  # start_search | cancel_search | execute | arrest | drop | achieved
+    desire: Desire | None = None
+    plan: PartialPlan | None = None
+    plan_id: str = ""  # arrest: the executing plan
+    after_step: str = ""  # arrest: the last step that may start ("" none more)
+    reason: str = ""
+
+
+@dataclass
+class Intention:
+    """The desire being pursued and the plan executing for it."""
+
+    desire: Desire
+    plan_id: str = ""
+    steps: list[str] = field(default_factory=list)
+    last_started: str = ""
+    plan_failures: int = 0
+    exec_failures: int = 0
+
+
+class IntentionScheduler:
+    """One agent's intention scheduler."""
+
+    def __init__(
+        self, preemption: str = "clean_preempt", plan_retries: int = 3, exec_retries: int = 3
+    ) -> None:
+        if preemption not in ("no_preempt", "preempt", "clean_preempt"):
+            raise ValueError(f"unknown preemption policy {preemption!r}")
+        self.preemption = preemption
+        self.plan_retries, self.exec_retries = plan_retries, exec_retries
+        self.current: Intention | None = None
+        self.pending_plan: PartialPlan | None = None  # waits for the executor to stop
+        self.next_desire: Desire | None = None  # waits for a clean preemption
+        self.stopping = False
+
+    # -- desires -------------------------------------------------------------------------
+    def choose(self, desire: Desire | None) -> list[Command]:
+        """React to the goal reasoner's choice (None: nothing to pursue)."""
+        cur = self.current
+        if desire is None or (cur is not None and desire.name == cur.desire.name):
+            return self._revise(desire) if desire is not None else []
+        if cur is None:
+            return self._start(desire)
+        if desire.priority <= cur.desire.priority or self.preemption == "no_preempt":
+            return []
+        commands = [Command("cancel_search", cur.desire, reason=f"preempted by {desire.name}")]
+        commands += self._arrest_now()
+        if self.preemption == "preempt" or not self.stopping:
+            self.current = None
+            self.next_desire = None
+            return commands + self._start(desire)
+        self.next_desire = desire  # clean_preempt: start once the executor stopped
+        return commands
+
+    def _revise(self, desire: Desire) -> list[Command]:
+        cur = self.current
+        assert cur is not None
+        if desire.goal == cur.desire.goal:
+            return []
+        cur.desire = desire  # a BOOSTed goal: the planner revises its search
+        return [Command("start_search", desire, reason="goal revised")]
+
+    def _start(self, desire: Desire) -> list[Command]:
+        self.current = Intention(desire)
+        self.pending_plan = None
+        return [Command("start_search", desire)]
+
+    def _arrest_now(self) -> list[Command]:
+        """Stop after the step running now (nothing more starts)."""
+        cur = self.current
+        if cur is None or not cur.plan_id:
+            self.stopping = False
+            return []
+        self.stopping = True
+        return [Command("arrest", plan_id=cur.plan_id, after_step=cur.last_started)]
+
+    # -- the planner ---------------------------------------------------------------------
+    def on_plan(self, plan: PartialPlan) -> list[Command]:
+        """A partial plan arrived: pass it on, or replace the executing plan safely."""
+        cur = self.current
+        if cur is None:
+            return []
+        if not cur.plan_id or plan.baseline == cur.plan_id or plan.plan_id == cur.plan_id:
+            return self._pass_on(plan)
+        self.pending_plan = plan
+        self.stopping = True
+        after = plan.applies_after or cur.last_started
+        return [
+            Command(
+                "arrest",
+                plan_id=cur.plan_id,
+                after_step=after,
+                reason=f"replaced by {plan.plan_id}",
+            )
+        ]
+
+    def _pass_on(self, plan: PartialPlan) -> list[Command]:
+        cur = self.current
+        assert cur is not None
+        cur.plan_id = plan.plan_id
+        cur.steps += [s.step_id for s in plan.steps if s.step_id not in cur.steps]
+        return [Command("execute", cur.desire, plan=plan)]
+
+    def on_search_failed(self, reason: str) -> list[Command]:
+        """The planner found no plan: retry, or drop the desire."""
+        cur = self.current
+        if cur is None:
+            return []
+        cur.plan_failures += 1
+        if cur.plan_failures > self.plan_retries:
+            return self._drop(f"planning failed {cur.plan_failures} times: {reason}")
+        return [Command("start_search", cur.desire, reason=f"retry after: {reason}")]
+
+    # -- the executor --------------------------------------------------------------------
+    def on_status(self, status: ActionStatus) -> list[Command]:
+        """Follow the executor: a failed or refused step means replan (or drop)."""
+        cur = self.current
+        if cur is None or status.plan_id != cur.plan_id:
+            return []
+        if status.status == "running":
+            cur.last_started = status.step_id
+        if status.status not in ("failed", "refused"):
+            return []
+        cur.exec_failures += 1
+        if cur.exec_failures > self.exec_retries:
+            return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
+        cur.plan_id, cur.steps, cur.last_started = "", [], ""
+        return [Command("start_search", cur.desire, reason=f"replan after: {status.reason}")]
+
+    def on_arrested(self, report: ArrestReport) -> list[Command]:
+        """The executor stopped: pass the waiting plan on, or start the preempting desire."""
+        self.stopping = False
+        if self.next_desire is not None:
+            desire, self.next_desire = self.next_desire, None
+            self.current = None
+            return self._start(desire)
+        plan, self.pending_plan = self.pending_plan, None
+        cur = self.current
+        if plan is None or cur is None:
+            return []
+        cur.plan_id, cur.steps, cur.last_started = "", [], ""
+        return self._pass_on(plan)
+
+    # -- ends ----------------------------------------------------------------------------
+    def achieved(self) -> list[Command]:
+        """The intention's goal is believed true."""
+        cur = self.current
+        if cur is None:
+            return []
+        self.current = None
+        return [Command("achieved", cur.desire)]
+
+    def drop(self, reason: str) -> list[Command]:
+        """Drop the current intention (deadline passed, context failed)."""
+        return self._drop(reason)
+
+    def _drop(self, reason: str) -> list[Command]:
+        cur = self.current
+        if cur is None:
+            return []
+        commands = [Command("cancel_search", cur.desire, reason=reason)]
+        commands += self._arrest_now()
+        commands.append(Command("drop", cur.desire, reason=reason))
+        self.current = None
+        return commands

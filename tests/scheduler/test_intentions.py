@@ -1,0 +1,135 @@
+"""The intention scheduler: plans passed on or replaced safely, preemption, retries."""
+
+from __future__ import annotations
+
+import pytest
+
+from cbdi.beliefs import fact
+from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
+from cbdi_scheduler.desires import Desire
+from cbdi_scheduler.intentions import Command, IntentionScheduler
+
+RECYCLE = Desire("recycle", (fact("recycled", "a"),), 0.5, 100.0)
+URGENT = Desire("urgent", (fact("safe"),), 0.9, 100.0)
+
+
+def plan(plan_id: str, *ids: str, baseline: str = "", after: str = "") -> PartialPlan:
+    steps = [PlanStep(step_id=i, action="move", args=[], start=0.0, duration=1.0) for i in ids]
+    return PartialPlan(
+        agent="r", plan_id=plan_id, baseline=baseline, steps=steps, applies_after=after
+    )
+
+
+def kinds(commands: list[Command]) -> list[str]:
+    return [c.kind for c in commands]
+
+
+def status(plan_id: str, step: str, state: str, reason: str = "") -> ActionStatus:
+    return ActionStatus(
+        agent="r",
+        plan_id=plan_id,
+        step_id=step,
+        action="move",
+        status=state,
+        reason=reason,
+        time=0.0,
+    )
+
+
+def arrested(plan_id: str, last: str) -> ArrestReport:
+    return ArrestReport(agent="r", plan_id=plan_id, last_step=last, time=1.0, cancelled=[])
+
+
+def running(policy: str = "clean_preempt") -> IntentionScheduler:
+    s = IntentionScheduler(policy)
+    assert kinds(s.choose(RECYCLE)) == ["start_search"]
+    assert kinds(s.on_plan(plan("p1", "s1", "s2"))) == ["execute"]
+    s.on_status(status("p1", "s1", "running"))
+    return s
+
+
+def test_continuations_are_passed_on() -> None:
+    s = running()
+    more = s.on_plan(plan("p2", "s3", baseline="p1"))
+    assert kinds(more) == ["execute"] and more[0].plan is not None
+    assert s.current is not None and s.current.steps == ["s1", "s2", "s3"]
+
+
+def test_a_repair_replaces_the_queue_after_an_early_arrest() -> None:
+    s = running()
+    out = s.on_plan(plan("r1", "t1", baseline="committed", after="s1"))
+    assert kinds(out) == ["arrest"] and (out[0].plan_id, out[0].after_step) == ("p1", "s1")
+    done = s.on_arrested(arrested("p1", "s1"))
+    assert kinds(done) == ["execute"] and done[0].plan is not None
+    assert done[0].plan.plan_id == "r1"
+    assert s.current is not None and s.current.plan_id == "r1"
+
+
+def test_a_boosted_goal_revises_the_search() -> None:
+    s = running()
+    bigger = Desire("recycle", (fact("recycled", "a"), fact("recycled", "b")), 0.5, 100.0)
+    out = s.choose(bigger)
+    assert kinds(out) == ["start_search"] and out[0].reason == "goal revised"
+    assert s.choose(bigger) == []  # nothing new
+
+
+def test_no_preempt_keeps_the_intention() -> None:
+    s = running("no_preempt")
+    assert s.choose(URGENT) == []
+    assert s.current is not None and s.current.desire.name == "recycle"
+
+
+def test_preempt_starts_the_new_desire_at_once() -> None:
+    s = running("preempt")
+    out = s.choose(URGENT)
+    assert kinds(out) == ["cancel_search", "arrest", "start_search"]
+    assert out[1].after_step == "s1"  # the running step finishes, nothing after it
+    assert s.current is not None and s.current.desire.name == "urgent"
+
+
+def test_clean_preempt_waits_for_the_robot_to_stop() -> None:
+    s = running("clean_preempt")
+    out = s.choose(URGENT)
+    assert kinds(out) == ["cancel_search", "arrest"]
+    assert s.current is not None and s.current.desire.name == "recycle"
+    started = s.on_arrested(arrested("p1", "s1"))
+    assert kinds(started) == ["start_search"] and started[0].desire == URGENT
+
+
+def test_lower_priority_never_preempts() -> None:
+    s = running("preempt")
+    low = Desire("patrol", (fact("in", "r", "c"),), 0.1, 100.0)
+    assert s.choose(low) == []
+
+
+def test_execution_failures_replan_then_drop() -> None:
+    s = IntentionScheduler(exec_retries=1)
+    s.choose(RECYCLE)
+    s.on_plan(plan("p1", "s1"))
+    first = s.on_status(status("p1", "s1", "failed", "blocked by person p"))
+    assert kinds(first) == ["start_search"] and "blocked by person p" in first[0].reason
+    s.on_plan(plan("p2", "s2"))
+    out = s.on_status(status("p2", "s2", "refused", "(free c) does not hold"))
+    assert kinds(out)[-1] == "drop" and "execution failed 2 times" in out[-1].reason
+    assert s.current is None
+
+
+def test_planning_failures_retry_then_drop() -> None:
+    s = IntentionScheduler(plan_retries=2)
+    s.choose(RECYCLE)
+    assert kinds(s.on_search_failed("no plan")) == ["start_search"]
+    assert kinds(s.on_search_failed("no plan")) == ["start_search"]
+    out = s.on_search_failed("no plan")
+    assert kinds(out) == ["cancel_search", "drop"] and "planning failed 3 times" in out[-1].reason
+
+
+def test_achieved_and_stale_messages() -> None:
+    s = running()
+    assert s.on_status(status("old-plan", "x", "failed")) == []  # not the current plan
+    assert kinds(s.achieved()) == ["achieved"] and s.current is None
+    assert s.on_plan(plan("p9", "s9")) == []
+
+
+def test_unknown_policy_is_refused() -> None:
+    with pytest.raises(ValueError, match="preemption"):
+        IntentionScheduler("sometimes")
