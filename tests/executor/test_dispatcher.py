@@ -38,9 +38,19 @@ def statuses(out: Effects) -> list[tuple[str, str]]:
     return [(s.step_id, s.status) for s in out.statuses]
 
 
+def start(d: Dispatcher, now: float, beliefs: BeliefSet = FREE) -> Effects:
+    """Tick, and let the world accept what was dispatched (as the service does)."""
+    out = d.tick(now, beliefs)
+    for req in out.requests:
+        reply = ActionReply(
+            request_id=req.request_id, accepted=True, starts_at=now, ends_at=now + 1.0
+        )
+        out.statuses += d.on_reply(reply, now).statuses
+    return out
+
+
 def finish(d: Dispatcher, out: Effects, now: float, ok: bool = True) -> Effects:
     req = out.requests[0]
-    d.on_reply(ActionReply(request_id=req.request_id, accepted=True), now)
     return d.on_outcome(
         ActionOutcome(
             agent="r",
@@ -61,26 +71,26 @@ def test_steps_start_at_their_time_one_at_a_time() -> None:
         ("s0", "waiting"),
         ("s1", "waiting"),
     ]
-    first = d.tick(0.0, FREE)
+    first = start(d, 0.0, FREE)
     assert first.requests[0].target == (1, 0) and statuses(first) == [("s0", "running")]
-    assert d.tick(1.0, FREE).requests == []  # s0 still running: s1 waits
+    assert start(d, 1.0, FREE).requests == []  # s0 still running: s1 waits
     assert statuses(finish(d, first, 1.0)) == [("s0", "succeeded")]
-    second = d.tick(1.0, FREE)
+    second = start(d, 1.0, FREE)
     assert second.requests[0].target == (2, 0)
 
 
 def test_not_before_its_time() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 2.0)), 0)
-    assert d.tick(1.0, FREE).requests == []
-    assert len(d.tick(2.0, FREE).requests) == 1
+    assert start(d, 1.0, FREE).requests == []
+    assert len(start(d, 2.0, FREE).requests) == 1
 
 
 def test_inapplicable_step_is_refused_and_the_plan_ends() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
     blocked = FREE.removing([fact("free", "c_1_0")])
-    out = d.tick(0.0, blocked)
+    out = start(d, 0.0, blocked)
     assert out.requests == []
     assert statuses(out) == [("s0", "refused"), ("s1", "cancelled")]
     assert "(free c_1_0) does not hold" in out.statuses[0].reason
@@ -89,7 +99,7 @@ def test_inapplicable_step_is_refused_and_the_plan_ends() -> None:
 def test_failed_or_rejected_action_cancels_the_rest() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
-    out = finish(d, d.tick(0.0, FREE), 1.0, ok=False)
+    out = finish(d, start(d, 0.0, FREE), 1.0, ok=False)
     assert statuses(out) == [("s0", "failed"), ("s1", "cancelled")]
     assert out.statuses[0].reason == "blocked by person p"
     d2 = Dispatcher("r")
@@ -104,10 +114,16 @@ def test_failed_or_rejected_action_cancels_the_rest() -> None:
 def test_over_all_violation_is_reported_while_running() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 0.0)), 0)
-    d.tick(0.0, FREE)
-    out = d.tick(0.5, FREE.removing([fact("free", "c_1_0")]))
+    start(d, 0.0, FREE)
+    out = start(d, 0.5, FREE.removing([fact("free", "c_1_0")]))
     assert statuses(out) == [("s0", "running")]
     assert "over all condition (free c_1_0)" in out.statuses[0].reason
+    assert start(d, 0.7, FREE.removing([fact("free", "c_1_0")])).statuses == []  # said once
+    d2 = Dispatcher("r")
+    d2.load(plan("p", move(0, 0.0)), 0)
+    start(d2, 0.0)
+    arrived = FREE.removing([fact("free", "c_1_0")])  # the robot itself is there now
+    assert start(d2, 1.0, arrived).statuses == []  # at the end point: not a violation
 
 
 def test_continuation_appends_and_new_baseline_replaces() -> None:
@@ -115,7 +131,7 @@ def test_continuation_appends_and_new_baseline_replaces() -> None:
     d.load(plan("p", move(0, 0.0)), 0)
     more = d.load(plan("p2", move(1, 1.0), baseline="p"), 0)
     assert statuses(more) == [("s1", "waiting")] and len(d.steps) == 2
-    running = d.tick(0.0, FREE)
+    running = start(d, 0.0, FREE)
     swap = d.load(plan("q", move(5, 3.0)), 0.5)  # a repair: replaces what waits
     assert ("s1", "cancelled") in statuses(swap) and ("s5", "waiting") in statuses(swap)
     assert [s.step.step_id for s in d.steps] == ["s0", "s5"]  # the running step stays
@@ -125,21 +141,21 @@ def test_continuation_appends_and_new_baseline_replaces() -> None:
 def test_early_arrest_lets_the_started_step_finish_and_starts_nothing_after() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 0.0), move(1, 1.0), move(2, 2.0)), 0)
-    first = d.tick(0.0, FREE)
+    first = start(d, 0.0, FREE)
     assert d.early_arrest("p", "s0", 0.5).arrest is None  # s0 still runs
     done = finish(d, first, 1.0)
     assert done.arrest is not None
     assert done.arrest.last_step == "s0" and done.arrest.cancelled == ["s1", "s2"]
-    assert d.tick(2.0, FREE).requests == []
+    assert start(d, 2.0, FREE).requests == []
 
 
 def test_early_arrest_waits_for_steps_up_to_the_arrest_point() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 0.0), move(1, 1.0), move(2, 2.0)), 0)
     assert d.early_arrest("p", "s1", 0.0).arrest is None
-    out = finish(d, d.tick(0.0, FREE), 1.0)
+    out = finish(d, start(d, 0.0, FREE), 1.0)
     assert out.arrest is None  # s1 may still start
-    out = finish(d, d.tick(1.0, FREE), 2.0)
+    out = finish(d, start(d, 1.0, FREE), 2.0)
     assert out.arrest is not None and out.arrest.last_step == "s1"
     assert out.arrest.cancelled == ["s2"]
     assert d.early_arrest("other", "s0", 2.0).arrest is None  # not the current plan
@@ -173,5 +189,5 @@ def test_checks_and_bindings() -> None:
 def test_an_unbound_action_is_refused_not_crashed() -> None:
     d = Dispatcher("r")
     d.load(plan("p", PlanStep(step_id="z", action="fly", args=["r"], start=0, duration=1)), 0)
-    out = d.tick(0.0, FREE)
+    out = start(d, 0.0, FREE)
     assert statuses(out) == [("z", "refused")] and "no action" in out.statuses[0].reason

@@ -93,3 +93,14 @@ def test_decode_any_picks_by_schema() -> None:
 def test_random_bytes_never_crash_the_decoder(data: bytes) -> None:
     with contextlib.suppress(WireError):  # only WireError may come out, never a crash
         decode(data, Percepts)
+
+
+def test_beliefs_round_trip_through_the_wire() -> None:
+    from cbdi.beliefs import BeliefSet, fact, fluent, from_wire, instance, to_wire
+    from cbdi.wire.agent import BeliefsUpdate
+
+    beliefs = BeliefSet.of(
+        [instance("r", "robot"), fact("in", "r", "c_0_1"), fluent("loaded_amount", "r", value=2)]
+    )
+    update = decode(encode(to_wire(beliefs, "r", 3.0, epoch=3)), BeliefsUpdate)
+    assert from_wire(update) == beliefs and update.epoch == 3

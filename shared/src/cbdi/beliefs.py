@@ -13,7 +13,9 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-__all__ = ["Atom", "Belief", "BeliefSet"]
+from cbdi.wire.agent import BeliefsUpdate
+
+__all__ = ["Atom", "Belief", "BeliefSet", "fact", "fluent", "from_wire", "instance", "to_wire"]
 
 Atom = tuple[str, ...]  # ("litter_pose", "pla61", "c_6_1"): a predicate or function and its args
 
@@ -123,3 +125,24 @@ class BeliefSet:
         return hash(
             (frozenset(self.instances.items()), self.facts, frozenset(self.fluents.items()))
         )
+
+
+def to_wire(beliefs: BeliefSet, agent: str, time: float, epoch: int = -1) -> BeliefsUpdate:
+    """Return the message that publishes `beliefs`."""
+    return BeliefsUpdate(
+        agent=agent,
+        time=time,
+        epoch=epoch,
+        instances=dict(beliefs.instances),
+        facts=[list(a) for a in sorted(beliefs.facts)],
+        fluents=[(list(a), v) for a, v in sorted(beliefs.fluents.items())],
+    )
+
+
+def from_wire(update: BeliefsUpdate) -> BeliefSet:
+    """Return the belief set a `BeliefsUpdate` carries."""
+    return BeliefSet(
+        MappingProxyType(dict(update.instances)),
+        frozenset(tuple(f) for f in update.facts),
+        MappingProxyType({tuple(a): float(v) for a, v in update.fluents}),
+    )

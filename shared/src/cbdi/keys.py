@@ -31,7 +31,12 @@ __all__ = [
     "component_rpc",
     "describe",
     "errors",
+    "executor_arrested",
+    "executor_status",
     "monitor_stream",
+    "scheduler_arrest",
+    "scheduler_beliefs",
+    "scheduler_plans",
     "service_id",
     "service_of_alive",
     "trace",
@@ -103,6 +108,31 @@ def agent_stream(agent: str, component: str, stream: str) -> str:
 def component_rpc(agent: str, component: str, name: str) -> str:
     """Return the key of a request endpoint of an agent's component."""
     return f"{ROOT}/{agent}/{component}/rpc/{name}"
+
+
+def scheduler_plans(agent: str) -> str:
+    """Return the key on which the scheduler passes plans to its executor."""
+    return agent_stream(agent, "scheduler", "plans")
+
+
+def scheduler_arrest(agent: str) -> str:
+    """Return the key on which the scheduler asks its executor for an early arrest."""
+    return agent_stream(agent, "scheduler", "arrest")
+
+
+def scheduler_beliefs(agent: str) -> str:
+    """Return the key on which the scheduler publishes the agent's beliefs."""
+    return agent_stream(agent, "scheduler", "beliefs")
+
+
+def executor_status(agent: str) -> str:
+    """Return the key on which the executor reports every plan step's status."""
+    return agent_stream(agent, "executor", "status")
+
+
+def executor_arrested(agent: str) -> str:
+    """Return the key on which the executor reports that it stopped (early arrest)."""
+    return agent_stream(agent, "executor", "arrested")
 
 
 def agent_ack(agent: str) -> str:

@@ -32,6 +32,7 @@ class StepState:
     status: str = "waiting"
     reason: str = ""
     request_id: str = ""
+    ends_at: float = float("inf")  # when the world said it ends (once accepted)
 
 
 @dataclass
@@ -78,16 +79,24 @@ class Dispatcher:
     def running(self) -> StepState | None:
         return next((s for s in self.steps if s.status == "running"), None)
 
+    def outcome_due(self, now: float) -> bool:
+        """Whether a running step should have ended by `now` (its outcome is on its way)."""
+        current = self.running()
+        return current is not None and current.ends_at <= now + EPS
+
     # -- time ----------------------------------------------------------------------------
     def tick(self, now: float, beliefs: BeliefSet) -> Effects:
         """Start the next due step if nothing runs; report over-all violations."""
         out = Effects()
         current = self.running()
         if current is not None:
-            broken = first_failing(current.step.over_all, beliefs)
-            if broken is not None:
-                current.reason = f"over all condition {describe(broken)} does not hold"
-                self._report(current, now, out)
+            # Over-all conditions hold on the open interval: at its end an action's own
+            # effects may end them (a robot arriving makes its cell not free).
+            if now < current.ends_at - EPS and not current.reason:
+                broken = first_failing(current.step.over_all, beliefs)
+                if broken is not None:
+                    current.reason = f"over all condition {describe(broken)} does not hold"
+                    self._report(current, now, out)
             return out
         step = next((s for s in self.steps if s.status == "waiting"), None)
         if step is None or step.step.start > now + EPS or self._arrested(step):
@@ -118,7 +127,7 @@ class Dispatcher:
             self._abandon(now, out)
             return
         state.request_id = request.request_id
-        self._set(state, "running", "", now, out)
+        state.status = "running"  # reported with the world's start time, on its reply
         out.requests.append(request)
 
     # -- the world's answers -------------------------------------------------------------
@@ -126,7 +135,12 @@ class Dispatcher:
         """Follow the world's immediate answer to a request."""
         out = Effects()
         state = self._by_request(reply.request_id)
-        if state is not None and not reply.accepted:
+        if state is None:
+            return out
+        if reply.accepted:
+            state.ends_at = reply.ends_at
+            self._report(state, reply.starts_at, out)
+        else:
             self._set(state, "failed", f"rejected by the world: {reply.reason}", now, out)
             self._abandon(now, out)
             self._maybe_report_arrest(now, out)

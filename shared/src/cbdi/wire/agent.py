@@ -102,3 +102,4 @@ class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
     instances: dict[str, str]
     facts: list[list[str]]
     fluents: list[tuple[list[str], float]]
+    epoch: int = -1  # the world epoch whose percepts these beliefs include

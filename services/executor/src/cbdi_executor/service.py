@@ -1,0 +1,166 @@
+"""The executor service: the dispatcher on the bus, for one agent.
+
+Inputs: plans and early-arrest requests from the agent's scheduler, its beliefs (one
+update per world epoch), the world's clock and the agent's action outcomes. Outputs:
+action requests to the world, every step's status, arrest reports, and the epoch
+acknowledgements the world waits for in lockstep mode. An epoch is acknowledged once the
+beliefs of that epoch were seen and every due step was dispatched (or at once when
+nothing waits), so a lockstep world never runs ahead of the agent.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass, field
+
+from cbdi import keys
+from cbdi.beliefs import BeliefSet, from_wire
+from cbdi.bus import publish, request
+from cbdi.bus.base import Sample
+from cbdi.clock import SimClock
+from cbdi.errors import CbdiError, WireError
+from cbdi.runtime import ServiceContext, ServiceSettings
+from cbdi.runtime.service import ServiceMain
+from cbdi.wire.agent import BeliefsUpdate, EarlyArrest, PartialPlan
+from cbdi.wire.base import Message, decode_any
+from cbdi.wire.world import ActionOutcome, ActionReply, EpochAck, Tick
+from cbdi_executor.dispatcher import Dispatcher, Effects
+
+__all__ = ["ExecutorService", "ExecutorSettings", "executor_main"]
+
+INPUTS: tuple[type[Message], ...] = (Tick, BeliefsUpdate, PartialPlan, EarlyArrest, ActionOutcome)
+
+
+@dataclass(frozen=True)
+class ExecutorSettings(ServiceSettings):
+    """Settings of `cbdi-executor`."""
+
+    agent: str = field(default="robot1", metadata={"help": "the agent this executor serves"})
+
+
+class ExecutorService:
+    """One agent's executor on the bus."""
+
+    def __init__(self, ctx: ServiceContext, agent: str) -> None:
+        self.ctx, self.agent = ctx, agent
+        self.dispatcher = Dispatcher(agent)
+        self.clock = SimClock()
+        self.beliefs = BeliefSet()
+        self.beliefs_epoch = -1
+        self.outcome_epoch = -1
+        self.acked = -1
+
+    def input_keys(self) -> list[str]:
+        a = self.agent
+        return [
+            keys.world_stream("clock"),
+            keys.world_outcomes(a),
+            keys.scheduler_plans(a),
+            keys.scheduler_arrest(a),
+            keys.scheduler_beliefs(a),
+        ]
+
+    async def run(self, inbox: asyncio.Queue[Sample]) -> None:
+        """Handle every input in arrival order (one task: no races between inputs)."""
+        while True:
+            sample = await inbox.get()
+            try:
+                msg = decode_any(sample.payload, INPUTS, sample.key)
+            except WireError as exc:
+                self.ctx.bad_input(sample.key, exc)
+                continue
+            await self.handle(msg)
+
+    async def handle(self, msg: Message) -> None:
+        now = self.clock.now()
+        if isinstance(msg, Tick):
+            self.clock.on_tick(msg.epoch, msg.time)
+            await self.step()
+        elif isinstance(msg, BeliefsUpdate):
+            if msg.agent == self.agent and msg.epoch >= self.beliefs_epoch:
+                self.beliefs, self.beliefs_epoch = from_wire(msg), msg.epoch
+                self.clock.on_tick(msg.epoch, msg.time)  # the world has reached that epoch
+                await self.step()
+        elif isinstance(msg, PartialPlan):
+            await self.send(self.dispatcher.load(msg, now))
+            await self.step()
+        elif isinstance(msg, EarlyArrest):
+            await self.send(self.dispatcher.early_arrest(msg.plan_id, msg.after_step, now))
+        elif isinstance(msg, ActionOutcome):
+            self.outcome_epoch = max(self.outcome_epoch, msg.epoch)
+            self.clock.on_tick(msg.epoch, msg.time)
+            await self.send(self.dispatcher.on_outcome(msg, self.clock.now()))
+            await self.step()
+        await self.maybe_ack()
+
+    def current(self) -> bool:
+        """Whether the beliefs are as new as everything the world told us (clock, outcomes).
+
+        Inputs come from several publishers, so an outcome or a tick may arrive before the
+        scheduler's beliefs of the same epoch: conditions are only checked once they have.
+        """
+        return self.beliefs_epoch >= max(self.clock.epoch, self.outcome_epoch)
+
+    async def step(self) -> None:
+        """Dispatch what is due now (again after a refusal frees the next step)."""
+        while self.current():
+            effects = self.dispatcher.tick(self.clock.now(), self.beliefs)
+            await self.send(effects)
+            if not any(st.status == "refused" for st in effects.statuses):
+                return
+
+    async def maybe_ack(self) -> None:
+        """Acknowledge the epoch once acted upon (at once when nothing waits)."""
+        epoch = self.clock.epoch
+        if epoch <= self.acked:
+            return
+        waiting = any(s.status == "waiting" for s in self.dispatcher.steps)
+        if waiting and not self.current():
+            return  # the scheduler's beliefs of this epoch are on their way
+        if waiting and self.dispatcher.outcome_due(self.clock.now()):
+            return  # the world's outcome of this epoch is on its way: the next step follows
+        self.acked = epoch
+        ack = EpochAck(agent=self.agent, epoch=epoch)
+        await publish(self.ctx.bus, keys.agent_ack(self.agent), ack, block=True)
+
+    async def send(self, effects: Effects) -> None:
+        bus, now = self.ctx.bus, self.clock.now()
+        for req in effects.requests:
+            try:
+                reply = await request(bus, keys.world_rpc("act"), req, ActionReply)
+            except CbdiError as exc:
+                reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
+            effects.statuses += self.dispatcher.on_reply(reply, now).statuses
+        for status in effects.statuses:
+            self.ctx.log.info(
+                "step",
+                plan=status.plan_id,
+                step=status.step_id,
+                action=status.action,
+                status=status.status,
+                reason=status.reason,
+            )
+            await publish(bus, keys.executor_status(self.agent), status, block=True)
+        if effects.arrest is not None:
+            self.ctx.log.info(
+                "arrested", plan=effects.arrest.plan_id, last_step=effects.arrest.last_step
+            )
+            await publish(bus, keys.executor_arrested(self.agent), effects.arrest, block=True)
+
+
+def executor_main(settings: ExecutorSettings) -> ServiceMain:
+    """Return the service body of one executor."""
+
+    async def body(ctx: ServiceContext) -> None:
+        service = ExecutorService(ctx, settings.agent)
+        inbox: asyncio.Queue[Sample] = asyncio.Queue()
+        for key in service.input_keys():
+            ctx.start(_forward(ctx.bus.subscribe(key), inbox), name=f"in:{key}")
+        ctx.start(service.run(inbox), name="executor")
+
+    return body
+
+
+async def _forward(sub: object, inbox: asyncio.Queue[Sample]) -> None:
+    async for sample in sub:  # type: ignore[attr-defined]
+        inbox.put_nowait(sample)
