@@ -37,7 +37,7 @@ async def _finished_and_stats(endpoint: str) -> tuple[RunFinished, WorldStats, W
         await bus.close()
 
 
-@pytest.mark.parametrize("pacing", [["--lockstep"], ["--speed", "25"]])
+@pytest.mark.parametrize("pacing", [["--lockstep", "--speed", "0"], ["--speed", "25"]])
 async def test_scripted_agent_recycles_one_item(
     router: str, spawn: object, pacing: list[str]
 ) -> None:
@@ -88,6 +88,8 @@ async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -
         "--agent",
         "robot1",  # type: ignore[operator]
         "--lockstep",
+        "--speed",
+        "0",
         "--max-time",
         "6",
         env=env,

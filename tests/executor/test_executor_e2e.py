@@ -138,6 +138,8 @@ async def _run(
         "--agent",
         "robot1",  # type: ignore[operator]
         "--lockstep",
+        "--speed",
+        "20",
         "--no-stop-when-done",
         "--max-time",
         "40",

@@ -22,6 +22,8 @@ def test_literals_and_beliefs_read_the_pddl_way() -> None:
     assert parse_literal("(exists {x} - plastic)").belief == instance("{x}", "plastic")
     lt = parse_literal("(< (loaded_amount r) 3)")
     assert (lt.check, lt.value) == ("LT", 3.0)
+    with pytest.raises(LiteralSyntaxError, match="one expression in parentheses"):
+        parse_literal("pla61 - plastic")  # an instance is a belief, not a check
     for bad in ["(free c", "free c)", "", "(= (f) x)", "(exists x plastic)"]:
         with pytest.raises(LiteralSyntaxError):
             parse_literal(bad) if "exists" in bad else parse_belief(bad)

@@ -34,8 +34,12 @@ __all__ = [
     "executor_arrested",
     "executor_status",
     "monitor_stream",
+    "planner_plans",
+    "planner_requests",
+    "planner_status",
     "scheduler_arrest",
     "scheduler_beliefs",
+    "scheduler_desires",
     "scheduler_plans",
     "service_id",
     "service_of_alive",
@@ -123,6 +127,26 @@ def scheduler_arrest(agent: str) -> str:
 def scheduler_beliefs(agent: str) -> str:
     """Return the key on which the scheduler publishes the agent's beliefs."""
     return agent_stream(agent, "scheduler", "beliefs")
+
+
+def planner_requests(agent: str) -> str:
+    """Return the key on which the scheduler asks its planner to start, revise, cancel."""
+    return agent_stream(agent, "scheduler", "search")
+
+
+def planner_plans(agent: str) -> str:
+    """Return the key on which the planner publishes partial plans."""
+    return agent_stream(agent, "planner", "plans")
+
+
+def planner_status(agent: str) -> str:
+    """Return the key on which the planner reports its search status."""
+    return agent_stream(agent, "planner", "status")
+
+
+def scheduler_desires(agent: str) -> str:
+    """Return the key on which the scheduler reports desire events (activated, dropped)."""
+    return agent_stream(agent, "scheduler", "desires")
 
 
 def executor_status(agent: str) -> str:

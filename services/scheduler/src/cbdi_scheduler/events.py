@@ -9,9 +9,9 @@ what it holds and its load (`loaded_amount`) come with every percept.
 from __future__ import annotations
 
 from cbdi.beliefs import BeliefSet, fact, fluent, instance
-from cbdi.wire.world import Cell, Percepts
+from cbdi.wire.world import ActionOutcome, Cell, Percepts
 
-__all__ = ["cell_name", "revise_from_percepts"]
+__all__ = ["cell_name", "revise_from_outcome", "revise_from_percepts"]
 
 
 def cell_name(cell: Cell) -> str:
@@ -47,3 +47,13 @@ def revise_from_percepts(
         fresh += [instance(held, litter_type), fact("holding", me, held)]
     fresh.append(fluent("loaded_amount", me, value=float(len(p.holding))))
     return beliefs.removing(stale).adding(fresh)
+
+
+def revise_from_outcome(beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:
+    """Return `beliefs` revised with an action's outcome: what no percept shows.
+
+    A recycled item is in a bin, out of sight: only the outcome tells.
+    """
+    if outcome.status == "succeeded" and outcome.action == "recycle" and outcome.item:
+        return beliefs.adding([fact("recycled", outcome.item)])
+    return beliefs

@@ -25,7 +25,7 @@ class LiteralSyntaxError(ValueError):
     """A belief or literal that does not read; the message says what was expected."""
 
 
-def _tree(text: str) -> Tree:
+def _tree(text: str) -> list[Tree]:
     tokens = _TOKEN.findall(text)
     if not tokens:
         raise LiteralSyntaxError(f"{text!r}: empty")
@@ -42,8 +42,14 @@ def _tree(text: str) -> Tree:
             stack[-1].append(tok)
     if len(stack) != 1:
         raise LiteralSyntaxError(f"{text!r}: missing ')'")
-    top = stack[0]
-    return top[0] if len(top) == 1 else top
+    return stack[0]  # the top-level items
+
+
+def _one(top: list[Tree], text: str) -> list[Tree]:
+    """Return the single parenthesised expression `text` must be."""
+    if len(top) != 1 or not isinstance(top[0], list):
+        raise LiteralSyntaxError(f"{text!r}: expected one expression in parentheses")
+    return top[0]
 
 
 def _atom(tree: Tree, text: str) -> tuple[str, tuple[str, ...]]:
@@ -61,15 +67,11 @@ def _number(tok: Tree, text: str) -> float:
 
 def parse_belief(text: str) -> Belief:
     """Read one belief: `(pred a b)`, `(= (func a) 3)` or `name - type`."""
-    tree = _tree(text)
-    if (
-        isinstance(tree, list)
-        and len(tree) == 3
-        and tree[1] == "-"
-        and all(isinstance(t, str) for t in tree)
-    ):
-        return instance(str(tree[0]), str(tree[2]))
-    if isinstance(tree, list) and tree and tree[0] == "=" and len(tree) == 3:
+    top = _tree(text)
+    if len(top) == 3 and top[1] == "-" and all(isinstance(t, str) for t in top):
+        return instance(str(top[0]), str(top[2]))
+    tree = _one(top, text)
+    if tree and tree[0] == "=" and len(tree) == 3:
         name, args = _atom(tree[1], text)
         return fluent(name, *args, value=_number(tree[2], text))
     name, args = _atom(tree, text)
@@ -78,15 +80,15 @@ def parse_belief(text: str) -> Belief:
 
 def parse_literal(text: str) -> Literal:
     """Read one condition literal (see the module docstring for the forms)."""
-    tree = _tree(text)
-    if isinstance(tree, list) and tree and tree[0] == "not" and len(tree) == 2:
+    tree = _one(_tree(text), text)
+    if tree and tree[0] == "not" and len(tree) == 2:
         name, args = _atom(tree[1], text)
         return Literal("F", fact(name, *args))
-    if isinstance(tree, list) and tree and tree[0] == "exists":
+    if tree and tree[0] == "exists":
         if len(tree) != 4 or tree[2] != "-" or not all(isinstance(t, str) for t in tree[1:]):
             raise LiteralSyntaxError(f"{text!r}: expected (exists NAME - TYPE)")
         return Literal("EX", instance(str(tree[1]), str(tree[3])))
-    if isinstance(tree, list) and tree and tree[0] in _OPS and len(tree) == 3:
+    if tree and tree[0] in _OPS and len(tree) == 3:
         name, args = _atom(tree[1], text)
         return Literal(_OPS[str(tree[0])], fluent(name, *args, value=0.0), _number(tree[2], text))
     name, args = _atom(tree, text)

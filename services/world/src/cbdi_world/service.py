@@ -4,7 +4,7 @@ Every epoch it steps the world and publishes the tick, action outcomes, each age
 percepts, a snapshot and (periodically) statistics. Requests (`act`, `stats`, `info`) are
 answered at once on the same event loop, so they never race with a step. Pacing comes
 from the injected clock: `speed` simulated seconds per wall second, or as fast as possible
-(speed 0), or lockstep (the next epoch only once every agent acknowledged this one).
+(speed 0), and in lockstep mode only once every agent acknowledged the epoch before.
 """
 
 from __future__ import annotations
@@ -170,10 +170,11 @@ class WorldService:
             await watch.aclose()  # type: ignore[attr-defined]
 
     async def pace(self, start: float) -> None:
+        """Wait until the next epoch may start: every ack (lockstep), then its due time."""
         s = self.settings
         if s.lockstep:
             await self.wait_acks(self.world.epoch)
-        elif s.speed > 0:
+        if s.speed > 0:
             due = start + (self.world.epoch + 1) * self.world.info().epoch_duration / s.speed
             await self.clock.sleep_until(due)
         else:

@@ -16,6 +16,7 @@ __all__ = [
     "ArrestReport",
     "BeliefsUpdate",
     "Check",
+    "DesireEvent",
     "EarlyArrest",
     "PartialPlan",
     "PlanStep",
@@ -103,3 +104,14 @@ class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
     facts: list[list[str]]
     fluents: list[tuple[list[str], float]]
     epoch: int = -1  # the world epoch whose percepts these beliefs include
+
+
+class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
+    """A desire was added, boosted, activated, achieved or dropped (with the reason)."""
+
+    agent: str
+    desire: str
+    event: str
+    reason: str
+    time: float
+    goal: list[list[str]] = []

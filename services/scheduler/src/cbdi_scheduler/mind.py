@@ -1,0 +1,123 @@
+"""The agent's mind: the BDI cycle as one pure object, fed by events, giving commands.
+
+On every percept: revise beliefs (Events Monitor), fire the reactive rules, drop desires
+whose deadline passed or whose context failed, notice an achieved intention, and let the
+goal reasoner choose what to pursue; the intention scheduler turns that into commands.
+Plans, search failures, step statuses and arrest reports go to the intention scheduler.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from cbdi.beliefs import BeliefSet
+from cbdi.wire.agent import ActionStatus, ArrestReport, DesireEvent, PartialPlan
+from cbdi.wire.world import ActionOutcome, Percepts
+from cbdi_scheduler.agentfile import AgentFile
+from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
+from cbdi_scheduler.events import revise_from_outcome, revise_from_percepts
+from cbdi_scheduler.intentions import Command, IntentionScheduler
+from cbdi_scheduler.rules import fire_rules
+
+__all__ = ["Mind", "Reaction"]
+
+
+@dataclass
+class Reaction:
+    """What the mind decided after one event."""
+
+    commands: list[Command] = field(default_factory=list)
+    events: list[DesireEvent] = field(default_factory=list)
+    beliefs_changed: bool = False
+
+
+class Mind:
+    """One agent's beliefs, desires and intentions."""
+
+    def __init__(self, spec: AgentFile) -> None:
+        self.spec = spec
+        self.agent = spec.agent
+        self.beliefs = BeliefSet.of(spec.beliefs)
+        self.desires: dict[str, Desire] = {d.name: d for d in spec.desires}
+        self.intentions = IntentionScheduler(spec.preemption, spec.plan_retries, spec.exec_retries)
+        self.now = 0.0
+        self.epoch = -1
+
+    def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
+        return DesireEvent(
+            agent=self.agent,
+            desire=desire.name,
+            event=event,
+            reason=reason,
+            time=self.now,
+            goal=[list(g.atom) for g in desire.goal],
+        )
+
+    def on_percepts(self, p: Percepts) -> Reaction:
+        """Run one BDI cycle on this epoch's percepts."""
+        self.now, self.epoch = p.time, p.epoch
+        before = self.beliefs
+        self.beliefs = revise_from_percepts(self.beliefs, p)
+        out = Reaction(beliefs_changed=self.beliefs != before)
+        if out.beliefs_changed or self.epoch == 0:
+            self._fire(out)
+        self._deliberate(out)
+        return out
+
+    def _fire(self, out: Reaction) -> None:
+        fired = fire_rules(self.spec.rules, self.beliefs, self.desires, self.now)
+        added = [d for n, d in fired.desires.items() if n not in self.desires]
+        self.beliefs, self.desires = fired.beliefs, fired.desires
+        out.events += [self.event(d, "added") for d in added]
+        out.events += [self.event(self.desires[n], "boosted") for n in fired.boosted]
+
+    def _deliberate(self, out: Reaction) -> None:
+        current = self.intentions.current
+        if current is not None and achieved(current.desire, self.beliefs):
+            out.commands += self.intentions.achieved()
+            out.events.append(self.event(current.desire, "achieved"))
+            self.desires.pop(current.desire.name, None)
+        active = self.intentions.current.desire.name if self.intentions.current else None
+        for drop in drops(self.desires, self.beliefs, self.now, active):
+            desire = self.desires.pop(drop.desire)
+            out.events.append(self.event(desire, "dropped", drop.reason))
+            if drop.desire == active:
+                out.commands += self.intentions.drop(drop.reason)
+        for name, d in list(self.desires.items()):
+            if achieved(d, self.beliefs) and name != active:
+                out.events.append(self.event(self.desires.pop(name), "achieved"))
+        chosen = select_desire(self.desires, self.beliefs, self.now)
+        before = self.intentions.current
+        out.commands += self.intentions.choose(chosen)
+        after = self.intentions.current
+        if after is not None and (before is None or before.desire.name != after.desire.name):
+            out.events.append(self.event(after.desire, "activated"))
+
+    def on_outcome(self, outcome: ActionOutcome) -> Reaction:
+        """Revise beliefs with what an action's outcome tells (the next cycle reacts)."""
+        if outcome.agent != self.agent:
+            return Reaction()
+        before = self.beliefs
+        self.beliefs = revise_from_outcome(self.beliefs, outcome)
+        return Reaction(beliefs_changed=self.beliefs != before)
+
+    # -- planner and executor ------------------------------------------------------------
+    def on_plan(self, plan: PartialPlan) -> Reaction:
+        return Reaction(self.intentions.on_plan(plan))
+
+    def on_search_failed(self, reason: str) -> Reaction:
+        return self._with_drops(self.intentions.on_search_failed(reason))
+
+    def on_status(self, status: ActionStatus) -> Reaction:
+        return self._with_drops(self.intentions.on_status(status))
+
+    def on_arrested(self, report: ArrestReport) -> Reaction:
+        return Reaction(self.intentions.on_arrested(report))
+
+    def _with_drops(self, commands: list[Command]) -> Reaction:
+        out = Reaction(commands)
+        for c in commands:
+            if c.kind == "drop" and c.desire is not None:
+                self.desires.pop(c.desire.name, None)
+                out.events.append(self.event(c.desire, "dropped", c.reason))
+        return out

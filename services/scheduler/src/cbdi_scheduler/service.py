@@ -1,0 +1,152 @@
+"""The scheduler service: one agent's mind on the bus.
+
+Inputs: the agent's percepts from the world, partial plans and search status from its
+planner, step statuses and arrest reports from its executor. Outputs: the belief set
+(every epoch, for the executor and the planner), desire events, search requests to the
+planner, plans and early-arrest requests to the executor.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass, field
+from itertools import count
+
+from cbdi import keys
+from cbdi.beliefs import to_wire
+from cbdi.bus import publish
+from cbdi.bus.base import Sample
+from cbdi.errors import WireError
+from cbdi.runtime import ServiceContext, ServiceSettings
+from cbdi.runtime.service import ServiceMain
+from cbdi.wire.agent import ActionStatus, ArrestReport, EarlyArrest, PartialPlan
+from cbdi.wire.base import Message, decode_any
+from cbdi.wire.planner import SearchRequest, SearchStatus
+from cbdi.wire.world import ActionOutcome, Percepts
+from cbdi_scheduler.intentions import Command
+from cbdi_scheduler.mind import Mind, Reaction
+
+__all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
+
+INPUTS: tuple[type[Message], ...] = (
+    Percepts,
+    ActionOutcome,
+    PartialPlan,
+    SearchStatus,
+    ActionStatus,
+    ArrestReport,
+)
+
+
+@dataclass(frozen=True)
+class SchedulerSettings(ServiceSettings):
+    """Settings of `cbdi-scheduler`."""
+
+    agent: str = field(default="robot1", metadata={"help": "the agent's name"})
+    agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
+
+
+class SchedulerService:
+    """The mind of one agent on the bus."""
+
+    def __init__(self, ctx: ServiceContext, mind: Mind) -> None:
+        self.ctx, self.mind, self.agent = ctx, mind, mind.agent
+        self.search_ids = count(1)
+        self.search_id = ""
+
+    def input_keys(self) -> list[str]:
+        a = self.agent
+        return [
+            keys.world_for_agent(a),  # percepts and action outcomes, in order
+            keys.planner_plans(a),
+            keys.planner_status(a),
+            keys.executor_status(a),
+            keys.executor_arrested(a),
+        ]
+
+    async def run(self, inbox: asyncio.Queue[Sample]) -> None:
+        while True:
+            sample = await inbox.get()
+            try:
+                msg = decode_any(sample.payload, INPUTS, sample.key)
+            except WireError as exc:
+                self.ctx.bad_input(sample.key, exc)
+                continue
+            await self.act(self.react(msg))
+            if isinstance(msg, Percepts):
+                update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
+                await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
+
+    def react(self, msg: Message) -> Reaction:
+        mind = self.mind
+        if isinstance(msg, Percepts):
+            return mind.on_percepts(msg)
+        if isinstance(msg, ActionOutcome):
+            return mind.on_outcome(msg)
+        if isinstance(msg, PartialPlan):
+            return mind.on_plan(msg)
+        if isinstance(msg, SearchStatus):
+            if msg.request_id == self.search_id and msg.status == "failed":
+                return mind.on_search_failed(msg.reason)
+            return Reaction()
+        if isinstance(msg, ActionStatus):
+            return mind.on_status(msg)
+        assert isinstance(msg, ArrestReport)
+        return mind.on_arrested(msg)
+
+    async def act(self, reaction: Reaction) -> None:
+        bus, a = self.ctx.bus, self.agent
+        for event in reaction.events:
+            self.ctx.log.info("desire", desire=event.desire, what=event.event, reason=event.reason)
+            await publish(bus, keys.scheduler_desires(a), event, block=True)
+        for c in reaction.commands:
+            msg = self.message(c)
+            if msg is None:
+                continue
+            self.ctx.log.info("command", kind=c.kind, reason=c.reason)
+            key = {
+                SearchRequest: keys.planner_requests(a),
+                PartialPlan: keys.scheduler_plans(a),
+                EarlyArrest: keys.scheduler_arrest(a),
+            }[type(msg)]
+            await publish(bus, key, msg, block=True)
+
+    def message(self, c: Command) -> Message | None:
+        a = self.agent
+        if c.kind == "start_search" and c.desire is not None:
+            revise = c.reason == "goal revised" and self.search_id
+            if not revise:
+                self.search_id = f"{a}-search-{next(self.search_ids)}"
+            return SearchRequest(
+                agent=a,
+                request_id=self.search_id,
+                kind="revise" if revise else "start",
+                desire=c.desire.name,
+                goal=[list(g.atom) for g in c.desire.goal],
+            )
+        if c.kind in ("cancel_search", "drop", "achieved") and self.search_id:
+            request_id, self.search_id = self.search_id, ""
+            return SearchRequest(agent=a, request_id=request_id, kind="cancel")
+        if c.kind == "execute" and c.plan is not None:
+            return c.plan
+        if c.kind == "arrest":
+            return EarlyArrest(agent=a, plan_id=c.plan_id, after_step=c.after_step)
+        return None
+
+
+def scheduler_main(mind: Mind) -> ServiceMain:
+    """Return the service body of one agent's scheduler."""
+
+    async def body(ctx: ServiceContext) -> None:
+        service = SchedulerService(ctx, mind)
+        inbox: asyncio.Queue[Sample] = asyncio.Queue()
+        for key in service.input_keys():
+            ctx.start(_forward(ctx.bus.subscribe(key), inbox), name=f"in:{key}")
+        ctx.start(service.run(inbox), name="scheduler")
+
+    return body
+
+
+async def _forward(sub: object, inbox: asyncio.Queue[Sample]) -> None:
+    async for sample in sub:  # type: ignore[attr-defined]
+        inbox.put_nowait(sample)

@@ -1,0 +1,106 @@
+"""The mind: the BDI cycle of the paper's recycler on percepts, plans and statuses."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cbdi.beliefs import fact
+from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
+from cbdi.wire.world import ActionOutcome, LitterView, Percepts
+from cbdi_scheduler.agentfile import load_agent
+from cbdi_scheduler.mind import Mind
+
+AGENT = Path(__file__).resolve().parents[2] / "domains/recycling/agents/recycler.toml"
+
+
+def percepts(
+    epoch: int,
+    litter: list[tuple[str, tuple[int, int]]] = (),  # type: ignore[assignment]
+    holding: list[str] = (),
+    position: tuple[int, int] = (0, 1),
+) -> Percepts:  # type: ignore[assignment]
+    return Percepts(
+        agent="robot1",
+        epoch=epoch,
+        time=float(epoch),
+        position=position,
+        depth=1,
+        free=[(1, 1)],
+        blocked=[(0, 0)],
+        holding=list(holding),
+        litter=[LitterView(name=n, cell=c) for n, c in litter],
+    )
+
+
+def test_sensing_litter_activates_recycling_and_extends_its_goal() -> None:
+    mind = Mind(load_agent(AGENT, "robot1"))
+    first = mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    assert [(e.desire, e.event) for e in first.events] == [
+        ("recycle", "added"),
+        ("recycle", "activated"),
+    ]
+    assert [c.kind for c in first.commands] == ["start_search"]
+    assert first.commands[0].desire is not None
+    assert first.commands[0].desire.goal == (fact("recycled", "pla1"),)
+    quiet = mind.on_percepts(percepts(1, [("pla1", (1, 1))]))
+    assert quiet.commands == [] and quiet.events == []  # nothing changed: nothing to do
+    more = mind.on_percepts(percepts(2, [("pla1", (1, 1)), ("pla2", (0, 2))]))
+    assert ("recycle", "boosted") in [(e.desire, e.event) for e in more.events]
+    revised = [c for c in more.commands if c.kind == "start_search"]
+    assert revised and revised[0].reason == "goal revised"
+
+
+def test_plans_flow_to_the_executor_and_failures_replan() -> None:
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    step = PlanStep(
+        step_id="a", action="move", args=["robot1", "c_0_1", "c_1_1"], start=0, duration=1
+    )
+    plan = PartialPlan(agent="robot1", plan_id="p1", baseline="", steps=[step])
+    assert [c.kind for c in mind.on_plan(plan).commands] == ["execute"]
+    failed = ActionStatus(
+        agent="robot1",
+        plan_id="p1",
+        step_id="a",
+        action="move",
+        status="failed",
+        reason="blocked by person p",
+        time=1.0,
+    )
+    assert [c.kind for c in mind.on_status(failed).commands] == ["start_search"]
+    assert (
+        mind.on_arrested(
+            ArrestReport(agent="robot1", plan_id="p1", last_step="a", time=1, cancelled=[])
+        ).commands
+        == []
+    )
+
+
+def test_the_goal_is_achieved_when_the_world_says_recycled() -> None:
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    mind.on_percepts(percepts(3, holding=["pla1"], position=(1, 1)))
+    done = ActionOutcome(
+        agent="robot1",
+        request_id="x",
+        action="recycle",
+        status="succeeded",
+        reason="",
+        epoch=9,
+        time=9.0,
+        item="pla1",
+    )
+    assert mind.on_outcome(done).beliefs_changed
+    out = mind.on_percepts(percepts(10, position=(1, 1)))
+    assert ("recycle", "achieved") in [(e.desire, e.event) for e in out.events]
+    assert "achieved" in [c.kind for c in out.commands]
+    assert mind.intentions.current is None and "recycle" not in mind.desires
+
+
+def test_a_passed_deadline_drops_the_desire() -> None:
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    late = mind.on_percepts(percepts(65, [("pla1", (1, 1))]))
+    dropped = [e for e in late.events if e.event == "dropped"]
+    assert len(dropped) == 1 and "deadline" in dropped[0].reason
+    assert "drop" in [c.kind for c in late.commands]
