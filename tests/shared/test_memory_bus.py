@@ -118,3 +118,19 @@ async def test_typed_serve_answers_garbage_with_error_reply_and_keeps_serving() 
         "cbdi/trace/world/rpc/act/request" in traced and "cbdi/trace/world/rpc/act/reply" in traced
     )
     task.cancel()
+
+
+async def test_inputs_merge_several_keys_in_order_and_skip_garbage() -> None:
+    from cbdi.bus import inputs
+    from cbdi.wire.common import RunFinished
+
+    net = MemoryNetwork()
+    a, b = net.bus(), net.bus()
+    sink = LogSink()
+    stream = inputs(b, ["cbdi/r1/executor/ack", "cbdi/world/events"], (EpochAck, RunFinished), sink)
+    await publish(a, "cbdi/r1/executor/ack", EpochAck(agent="r1", epoch=1))
+    await a.publish("cbdi/world/events", b"\xc1")
+    await publish(a, "cbdi/world/events", RunFinished(reason="done", epoch=2, time=2.0))
+    await publish(a, "cbdi/r1/executor/ack", EpochAck(agent="r1", epoch=2))
+    got = [type(m).__name__ for _, m in [await anext(stream) for _ in range(3)]]
+    assert got == ["EpochAck", "RunFinished", "EpochAck"] and len(sink.errors) == 1

@@ -10,19 +10,18 @@ nothing waits), so a lockstep world never runs ahead of the agent.
 
 from __future__ import annotations
 
-import asyncio
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, from_wire
-from cbdi.bus import publish, request
-from cbdi.bus.base import Sample
+from cbdi.bus import inputs, publish, request
 from cbdi.clock import SimClock
-from cbdi.errors import CbdiError, WireError
+from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import BeliefsUpdate, EarlyArrest, PartialPlan
-from cbdi.wire.base import Message, decode_any
+from cbdi.wire.base import Message
 from cbdi.wire.world import ActionOutcome, ActionReply, EpochAck, Tick
 from cbdi_executor.dispatcher import Dispatcher, Effects
 
@@ -60,15 +59,9 @@ class ExecutorService:
             keys.scheduler_beliefs(a),
         ]
 
-    async def run(self, inbox: asyncio.Queue[Sample]) -> None:
+    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
         """Handle every input in arrival order (one task: no races between inputs)."""
-        while True:
-            sample = await inbox.get()
-            try:
-                msg = decode_any(sample.payload, INPUTS, sample.key)
-            except WireError as exc:
-                self.ctx.bad_input(sample.key, exc)
-                continue
+        async for _, msg in stream:
             await self.handle(msg)
 
     async def handle(self, msg: Message) -> None:
@@ -153,14 +146,7 @@ def executor_main(settings: ExecutorSettings) -> ServiceMain:
 
     async def body(ctx: ServiceContext) -> None:
         service = ExecutorService(ctx, settings.agent)
-        inbox: asyncio.Queue[Sample] = asyncio.Queue()
-        for key in service.input_keys():
-            ctx.start(_forward(ctx.bus.subscribe(key), inbox), name=f"in:{key}")
-        ctx.start(service.run(inbox), name="executor")
+        stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+        ctx.start(service.run(stream), name="executor")
 
     return body
-
-
-async def _forward(sub: object, inbox: asyncio.Queue[Sample]) -> None:
-    async for sample in sub:  # type: ignore[attr-defined]
-        inbox.put_nowait(sample)

@@ -8,19 +8,17 @@ planner, plans and early-arrest requests to the executor.
 
 from __future__ import annotations
 
-import asyncio
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from itertools import count
 
 from cbdi import keys
 from cbdi.beliefs import to_wire
-from cbdi.bus import publish
-from cbdi.bus.base import Sample
-from cbdi.errors import WireError
+from cbdi.bus import inputs, publish
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import ActionStatus, ArrestReport, EarlyArrest, PartialPlan
-from cbdi.wire.base import Message, decode_any
+from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.intentions import Command
@@ -64,14 +62,9 @@ class SchedulerService:
             keys.executor_arrested(a),
         ]
 
-    async def run(self, inbox: asyncio.Queue[Sample]) -> None:
-        while True:
-            sample = await inbox.get()
-            try:
-                msg = decode_any(sample.payload, INPUTS, sample.key)
-            except WireError as exc:
-                self.ctx.bad_input(sample.key, exc)
-                continue
+    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
+        """Handle every input in arrival order (one task: no races between inputs)."""
+        async for _, msg in stream:
             await self.act(self.react(msg))
             if isinstance(msg, Percepts):
                 update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
@@ -139,14 +132,7 @@ def scheduler_main(mind: Mind) -> ServiceMain:
 
     async def body(ctx: ServiceContext) -> None:
         service = SchedulerService(ctx, mind)
-        inbox: asyncio.Queue[Sample] = asyncio.Queue()
-        for key in service.input_keys():
-            ctx.start(_forward(ctx.bus.subscribe(key), inbox), name=f"in:{key}")
-        ctx.start(service.run(inbox), name="scheduler")
+        stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+        ctx.start(service.run(stream), name="scheduler")
 
     return body
-
-
-async def _forward(sub: object, inbox: asyncio.Queue[Sample]) -> None:
-    async for sample in sub:  # type: ignore[attr-defined]
-        inbox.put_nowait(sample)

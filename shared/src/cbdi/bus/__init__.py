@@ -2,7 +2,7 @@
 
 from cbdi.bus.base import AliveEvent, Bus, Handler, Sample, Subscription, Token
 from cbdi.bus.memory import MemoryBus, MemoryNetwork
-from cbdi.bus.typed import ErrorSink, LogSink, messages, publish, request, serve
+from cbdi.bus.typed import ErrorSink, LogSink, inputs, messages, publish, request, serve
 from cbdi.bus.zenoh_bus import BusConfig, ZenohBus, open_bus
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "Subscription",
     "Token",
     "ZenohBus",
+    "inputs",
     "messages",
     "open_bus",
     "publish",

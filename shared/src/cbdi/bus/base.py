@@ -8,7 +8,7 @@ here; typed messages are encoded and decoded by `cbdi.bus.typed` on top of this.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -66,8 +66,12 @@ class Bus(Protocol):
         """Publish `payload` on `key`; `block` (commands, plans) never drops under load."""
         ...
 
-    def subscribe(self, key_expr: str) -> Subscription:
-        """Subscribe to `key_expr` (wildcards allowed); samples queue until iterated."""
+    def subscribe(self, key_expr: str | Sequence[str]) -> Subscription:
+        """Subscribe to one or several key expressions (wildcards allowed) in one queue.
+
+        Samples of all of them arrive in one stream, in the order they were received, and
+        wait in the queue until iterated; nothing is dropped.
+        """
         ...
 
     async def request(self, key: str, payload: bytes, *, timeout: float = 2.0) -> bytes:

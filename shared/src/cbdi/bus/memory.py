@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import time
 from collections import Counter
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 
 import zenoh
@@ -53,8 +53,8 @@ class MemoryNetwork:
 
 
 class _MemorySubscription:
-    def __init__(self, network: MemoryNetwork, key_expr: str) -> None:
-        self.key_expr = key_expr
+    def __init__(self, network: MemoryNetwork, key_exprs: Sequence[str]) -> None:
+        self.key_exprs = list(key_exprs)
         self.queue: asyncio.Queue[Sample | None] = asyncio.Queue()
         self._network = network
         network.subscribers.append(self)
@@ -105,12 +105,13 @@ class MemoryBus:
         sample = Sample(key, bytes(payload), seq, time.time_ns())
         self.network.published.append(sample)
         for sub in list(self.network.subscribers):
-            if _matches(sub.key_expr, key):
+            if any(_matches(expr, key) for expr in sub.key_exprs):
                 sub.queue.put_nowait(sample)
 
-    def subscribe(self, key_expr: str) -> _MemorySubscription:
+    def subscribe(self, key_expr: str | Sequence[str]) -> _MemorySubscription:
         self._check()
-        sub = _MemorySubscription(self.network, key_expr)
+        exprs = [key_expr] if isinstance(key_expr, str) else key_expr
+        sub = _MemorySubscription(self.network, exprs)
         self._subscriptions.append(sub)
         return sub
 

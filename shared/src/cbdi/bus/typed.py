@@ -7,7 +7,7 @@ Bad input never kills the caller: an undecodable sample is handed to the `ErrorS
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from typing import Protocol, TypeVar
 
 from cbdi import keys
@@ -16,7 +16,7 @@ from cbdi.errors import CbdiError, RequestFailedError, WireError
 from cbdi.wire.base import Message, decode, decode_any, encode
 from cbdi.wire.common import ErrorReply
 
-__all__ = ["ErrorSink", "LogSink", "messages", "publish", "request", "serve"]
+__all__ = ["ErrorSink", "LogSink", "inputs", "messages", "publish", "request", "serve"]
 
 M = TypeVar("M", bound=Message)
 R = TypeVar("R", bound=Message)
@@ -66,6 +66,32 @@ async def _decoded(
         async for sample in sub:
             try:
                 message = decode(sample.payload, cls, sample.key)
+            except WireError as exc:
+                sink.bad_input(sample.key, exc)
+                continue
+            yield sample.key, message
+    finally:
+        await sub.close()
+
+
+def inputs(
+    bus: Bus, key_exprs: Sequence[str], classes: tuple[type[Message], ...], sink: ErrorSink
+) -> AsyncIterator[tuple[str, Message]]:
+    """Yield `(key, message)` from several keys in arrival order, each one of `classes`.
+
+    For a service with several inputs that must be handled one at a time, in order. The
+    subscriptions exist from this call on; undecodable samples go to `sink`.
+    """
+    return _decoded_any(bus.subscribe(key_exprs), classes, sink)
+
+
+async def _decoded_any(
+    sub: Subscription, classes: tuple[type[Message], ...], sink: ErrorSink
+) -> AsyncIterator[tuple[str, Message]]:
+    try:
+        async for sample in sub:
+            try:
+                message = decode_any(sample.payload, classes, sample.key)
             except WireError as exc:
                 sink.bad_input(sample.key, exc)
                 continue

@@ -13,7 +13,7 @@ import json
 import struct
 import time
 from collections import Counter, OrderedDict, deque
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
@@ -154,7 +154,9 @@ class _Inbox(Generic[T]):
 
 
 class _ZenohSubscription:
-    def __init__(self, bus: ZenohBus, key_expr: str) -> None:
+    """One inbox fed by a Zenoh subscriber per key expression, in arrival order."""
+
+    def __init__(self, bus: ZenohBus, key_exprs: Sequence[str]) -> None:
         self.queue: _Inbox[Sample | None] = _Inbox(bus.loop)
         push = self.queue.push
 
@@ -163,7 +165,9 @@ class _ZenohSubscription:
             push(Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns))
 
         self._bus = bus
-        self._sub: Any = bus.session.declare_subscriber(key_expr, Callback(on_sample))
+        self._subs: list[Any] = [
+            bus.session.declare_subscriber(k, Callback(on_sample)) for k in key_exprs
+        ]
         bus._closeables.add(self)
 
     def __aiter__(self) -> AsyncIterator[Sample]:
@@ -174,11 +178,12 @@ class _ZenohSubscription:
             yield sample
 
     async def close(self) -> None:
-        if self._sub is not None:
-            sub, self._sub = self._sub, None
+        if self._subs:
+            subs, self._subs = self._subs, []
             self._bus._closeables.discard(self)
-            with contextlib.suppress(zenoh.ZError):
-                sub.undeclare()
+            for sub in subs:
+                with contextlib.suppress(zenoh.ZError):
+                    sub.undeclare()
             self.queue.put(None)
 
 
@@ -243,9 +248,9 @@ class ZenohBus:
         self._publishers[(key, block)] = publisher
         return publisher
 
-    def subscribe(self, key_expr: str) -> _ZenohSubscription:
+    def subscribe(self, key_expr: str | Sequence[str]) -> _ZenohSubscription:
         self._check()
-        return _ZenohSubscription(self, key_expr)
+        return _ZenohSubscription(self, [key_expr] if isinstance(key_expr, str) else key_expr)
 
     async def request(self, key: str, payload: bytes, *, timeout: float = 2.0) -> bytes:
         self._check()
