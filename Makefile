@@ -29,8 +29,12 @@ system-tools:
 	    >/dev/null 2>&1 || echo "warning: could not install$$missing; tests needing them fail"; \
 	fi
 
+# The paper's 7x7 world: one robot, then three sharing it; the second run is recorded
+# to MCAP and inspected (see the README for replay and the rerun viewer).
 demo: venv
 	$(BIN)/cbdi up paper-7x7 --view text --quiet --until done
+	$(BIN)/cbdi up paper-7x7 --agents 3 --view text --quiet --until done --record runs/demo.mcap
+	$(BIN)/cbdi inspect runs/demo.mcap
 
 test: venv system-tools
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
