@@ -189,3 +189,28 @@ def test_percepts_revise_the_sensed_square_only() -> None:
     )
     assert after.holds(fact("holding", "robot", "pla9"))
     assert after.fluents[("loaded_amount", "robot")] == 1
+
+
+def test_map_beliefs_describe_the_grid() -> None:
+    from cbdi.wire.world import BinView, WorldInfo
+    from cbdi_scheduler.events import map_beliefs
+
+    info = WorldInfo(
+        map_name="m",
+        width=3,
+        height=2,
+        walls=[(1, 0)],
+        bins=[BinView(name="bin_0_0", cell=(0, 0))],
+        agents=["r"],
+        detection_depth={"r": 1},
+        capacity=3,
+        epoch_duration=1.0,
+        durations={},
+    )
+    beliefs = BeliefSet.of(map_beliefs(info))
+    assert beliefs.holds(fact("map_loaded")) and beliefs.holds(instance("c_2_1", "cell"))
+    assert not beliefs.holds(instance("c_1_0", "cell"))  # a wall is no cell
+    assert beliefs.holds(fact("near", "c_0_0", "c_0_1"))
+    assert not beliefs.holds(fact("near", "c_0_0", "c_1_0"))  # not into the wall
+    assert beliefs.holds(fact("bin_pose", "bin_0_0", "c_0_0"))
+    assert not beliefs.holds(fact("free", "c_0_0")) and beliefs.holds(fact("free", "c_2_0"))

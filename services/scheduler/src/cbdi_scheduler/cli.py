@@ -32,7 +32,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (CbdiError, ValueError) as exc:
         print(f"cbdi-scheduler: {exc}", file=sys.stderr)
         return 2
-    return run_service(settings, keys.service_id("scheduler", settings.agent), scheduler_main(mind))
+    return run_service(
+        settings, keys.service_id("scheduler", settings.agent), scheduler_main(mind, settings)
+    )
 
 
 if __name__ == "__main__":

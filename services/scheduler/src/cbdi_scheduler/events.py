@@ -8,10 +8,10 @@ what it holds and its load (`loaded_amount`) come with every percept.
 
 from __future__ import annotations
 
-from cbdi.beliefs import BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ActionOutcome, Cell, Percepts
+from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
+from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
 
-__all__ = ["cell_name", "revise_from_outcome", "revise_from_percepts"]
+__all__ = ["cell_name", "map_beliefs", "revise_from_outcome", "revise_from_percepts"]
 
 
 def cell_name(cell: Cell) -> str:
@@ -57,3 +57,28 @@ def revise_from_outcome(beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet
     if outcome.status == "succeeded" and outcome.action == "recycle" and outcome.item:
         return beliefs.adding([fact("recycled", outcome.item)])
     return beliefs
+
+
+def map_beliefs(info: WorldInfo, bin_type: str = "bin") -> list[Belief]:
+    """Return what an agent believes once it loaded the map (the paper's `map_loaded`).
+
+    Every cell that is not a wall is a `cell`, with `near` facts between 4-adjacent ones;
+    bins are placed; every cell that holds neither wall nor bin is believed free until
+    sensing says otherwise (people and robots are seen, not known in advance).
+    """
+    walls: set[Cell] = {(w[0], w[1]) for w in info.walls}
+    bins: dict[Cell, str] = {(b.cell[0], b.cell[1]): b.name for b in info.bins}
+    cells = [(x, y) for y in range(info.height) for x in range(info.width) if (x, y) not in walls]
+    out: list[Belief] = [fact("map_loaded")]
+    for c in cells:
+        out.append(instance(cell_name(c), "cell"))
+        if c not in bins:
+            out.append(fact("free", cell_name(c)))
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            n = (c[0] + dx, c[1] + dy)
+            if n in walls or not (0 <= n[0] < info.width and 0 <= n[1] < info.height):
+                continue
+            out.append(fact("near", cell_name(c), cell_name(n)))
+    for cell, name in bins.items():
+        out += [instance(name, bin_type), fact("bin_pose", name, cell_name(cell))]
+    return out

@@ -15,12 +15,15 @@ from itertools import count
 from cbdi import keys
 from cbdi.beliefs import to_wire
 from cbdi.bus import inputs, publish
+from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
+from cbdi.view import world_info
 from cbdi.wire.agent import ActionStatus, ArrestReport, EarlyArrest, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import ActionOutcome, Percepts
+from cbdi_scheduler.events import map_beliefs
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
 
@@ -42,6 +45,7 @@ class SchedulerSettings(ServiceSettings):
 
     agent: str = field(default="robot1", metadata={"help": "the agent's name"})
     agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
+    load_map: bool = field(default=True, metadata={"help": "ask the world for its map first"})
 
 
 class SchedulerService:
@@ -62,8 +66,20 @@ class SchedulerService:
             keys.executor_arrested(a),
         ]
 
-    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
+    async def load_map(self) -> None:
+        """Believe the world's map (cells, `near`, bins): the paper's `map_loaded`."""
+        try:
+            info = await world_info(self.ctx.bus, timeout=30.0)
+        except (CbdiError, TimeoutError) as exc:
+            self.ctx.log.warning("no_map", error=str(exc) or "the world did not answer")
+            return
+        self.mind.beliefs = self.mind.beliefs.adding(map_beliefs(info))
+        self.ctx.log.info("map_loaded", map=info.map_name, cells=info.width * info.height)
+
+    async def run(self, stream: AsyncIterator[tuple[str, Message]], load_map: bool) -> None:
         """Handle every input in arrival order (one task: no races between inputs)."""
+        if load_map:
+            await self.load_map()  # inputs wait in the stream meanwhile
         async for _, msg in stream:
             await self.act(self.react(msg))
             if isinstance(msg, Percepts):
@@ -127,12 +143,12 @@ class SchedulerService:
         return None
 
 
-def scheduler_main(mind: Mind) -> ServiceMain:
+def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
     """Return the service body of one agent's scheduler."""
 
     async def body(ctx: ServiceContext) -> None:
         service = SchedulerService(ctx, mind)
         stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
-        ctx.start(service.run(stream), name="scheduler")
+        ctx.start(service.run(stream, settings.load_map), name="scheduler")
 
     return body
