@@ -54,6 +54,9 @@ async def test_agent_pursues_its_desire_to_the_end(
     router: str, spawn: object, tmp_path: Path
 ) -> None:
     env = {"CBDI_CONNECT": router}
+    recording = tmp_path / "agent.mcap"
+    monitor = spawn("monitor", "cbdi-monitor", "--output", str(recording), env=env)  # type: ignore[operator]
+    wait_for(lambda: "event=ready" in monitor.output(), what="monitor ready")
     world = spawn(
         "world",
         "cbdi-world",
@@ -98,3 +101,12 @@ async def test_agent_pursues_its_desire_to_the_end(
         assert stats.litter_recycled == 1 and stats.agents[0].moves == 6
     finally:
         await bus.close()
+    await asyncio.sleep(0.3)
+    monitor.stop()
+    from cbdi_monitor.inspect import inspect_messages
+    from cbdi_monitor.reader import read_messages
+    from cbdi_monitor.view import convert
+
+    robot = inspect_messages(read_messages(recording)).agents["robot1"]
+    assert (robot.plans, robot.goals_achieved, robot.moves) == (1, 1, 6)
+    assert convert(recording, tmp_path / "agent.rrd") > 0

@@ -2,7 +2,8 @@
 
 Channels with message counts, the duration, and per agent: moves, actions by kind and
 outcome, failed and rejected actions, the simulated time of its first action, litter
-recycled, and (once planners run) replans and forecast-triggered repairs.
+recycled, plans executed, early arrests, goals achieved and desires dropped. Replans and
+forecast-triggered repairs stay `null` until the planner service (issue 4) reports them.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from cbdi.errors import CbdiError, WireError
+from cbdi.wire.agent import ArrestReport, DesireEvent, PartialPlan
 from cbdi.wire.base import decode
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import ActionOutcome, ActionRequest, Tick, WorldStats
@@ -36,6 +38,10 @@ class AgentReport:
     requests: int = 0
     recycled: int = 0
     first_action_time: float | None = None
+    plans: int = 0
+    arrests: int = 0
+    goals_achieved: int = 0
+    desires_dropped: int = 0
     replans: int | None = None
     forecast_repairs: int | None = None
 
@@ -97,7 +103,23 @@ def _account(report: Inspection, m: RecordedMessage, now: float) -> float:
         report.world_stats = {a.agent: _stats_dict(a) for a in stats.agents}
     elif m.schema == "cbdi.RunFinished/1":
         report.result = decode(m.payload, RunFinished, m.key).reason
+    else:
+        _agent_message(report, m)
     return now
+
+
+def _agent_message(report: Inspection, m: RecordedMessage) -> None:
+    """Count what the agents' own services said (plans, arrests, desires)."""
+    if m.schema == "cbdi.agent.PartialPlan/1" and m.key.endswith("/scheduler/plans"):
+        _agent(report, decode(m.payload, PartialPlan, m.key).agent).plans += 1
+    elif m.schema == "cbdi.agent.ArrestReport/1":
+        _agent(report, decode(m.payload, ArrestReport, m.key).agent).arrests += 1
+    elif m.schema == "cbdi.agent.DesireEvent/1":
+        event = decode(m.payload, DesireEvent, m.key)
+        if event.event == "achieved":
+            _agent(report, event.agent).goals_achieved += 1
+        elif event.event == "dropped":
+            _agent(report, event.agent).desires_dropped += 1
 
 
 def _outcome(agent: AgentReport, o: ActionOutcome) -> None:

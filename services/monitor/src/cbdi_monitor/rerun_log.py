@@ -4,7 +4,9 @@ Entity layout (what a user sees in the viewer):
 
 - `world/map/walls`, `world/map/bins` (static boxes), `world/people`, `world/litter`
 - `world/robots` (points labelled with names), `agents/<name>/intent` (the requested move)
-- `agents/<name>/log` (text log of requests and outcomes), `health` (services up/down)
+- `agents/<name>/log` (text log: requests, outcomes, desires, plans, step statuses, early
+  arrests), `world/plans/<name>` (the cells each received plan's moves visit),
+  `health` (services up/down)
 - `plots/<name>/{moves,recycled,failed,blocked}` (from the world's statistics)
 
 Timelines: `epoch` (sequence) and `sim_time` (simulated seconds).
@@ -15,6 +17,7 @@ from __future__ import annotations
 from typing import Any
 
 from cbdi.errors import WireError
+from cbdi.wire.agent import ActionStatus, ArrestReport, DesireEvent, PartialPlan
 from cbdi.wire.base import decode
 from cbdi.wire.common import Liveliness, RunFinished
 from cbdi.wire.world import (
@@ -183,6 +186,58 @@ class RerunLogger:
         done = decode(m.payload, RunFinished, m.key)
         self.log("health", self.rr.TextLog(f"run finished: {done.reason}", level="INFO"))
 
+    def on_desire(self, m: RecordedMessage) -> None:
+        rr, e = self.rr, decode(m.payload, DesireEvent, m.key)
+        goal = " ".join(f"({' '.join(g)})" for g in e.goal)
+        why = f": {e.reason}" if e.reason else ""
+        level = "WARN" if e.event == "dropped" else "INFO"
+        self.log(
+            f"agents/{e.agent}/log",
+            rr.TextLog(f"desire {e.desire} {e.event}{why} {goal}", level=level),
+        )
+
+    def on_plan(self, m: RecordedMessage) -> None:
+        """Draw the cells a plan's moves visit, from the robot's cell."""
+        rr, plan = self.rr, decode(m.payload, PartialPlan, m.key)
+        cells = [_cell(s.args[2]) for s in plan.steps if s.action == "move" and len(s.args) > 2]
+        path = [(x + 0.5, y + 0.5) for x, y in cells if x >= 0]
+        here = self.cells.get(plan.agent)
+        if here is not None:
+            path.insert(0, (here[0] + 0.5, here[1] + 0.5))
+        self.log(
+            f"agents/{plan.agent}/log",
+            rr.TextLog(
+                f"plan {plan.plan_id} (after {plan.baseline or 'nothing'}): {len(plan.steps)} steps"
+            ),
+        )
+        if len(path) > 1:
+            self.log(
+                f"world/plans/{plan.agent}",
+                rr.LineStrips2D([path], colors=[self.colour(plan.agent)], radii=0.06),
+            )
+
+    def on_status(self, m: RecordedMessage) -> None:
+        rr, st = self.rr, decode(m.payload, ActionStatus, m.key)
+        if st.status == "waiting":
+            return
+        why = f": {st.reason}" if st.reason else ""
+        level = "INFO" if st.status in ("running", "succeeded") else "WARN"
+        self.log(
+            f"agents/{st.agent}/log",
+            rr.TextLog(f"step {st.step_id} {st.action} {st.status}{why}", level=level),
+        )
+
+    def on_arrest(self, m: RecordedMessage) -> None:
+        rr, a = self.rr, decode(m.payload, ArrestReport, m.key)
+        self.log(
+            f"agents/{a.agent}/log",
+            rr.TextLog(
+                f"early arrest of {a.plan_id} after {a.last_step or 'nothing'}; "
+                f"cancelled {', '.join(a.cancelled) or 'nothing'}",
+                level="WARN",
+            ),
+        )
+
     _handlers = {
         "cbdi.world.Tick/1": on_tick,
         "cbdi.world.WorldInfo/1": on_info,
@@ -192,4 +247,16 @@ class RerunLogger:
         "cbdi.world.WorldStats/1": on_stats,
         "cbdi.Liveliness/1": on_alive,
         "cbdi.RunFinished/1": on_finished,
+        "cbdi.agent.DesireEvent/1": on_desire,
+        "cbdi.agent.PartialPlan/1": on_plan,
+        "cbdi.agent.ActionStatus/1": on_status,
+        "cbdi.agent.ArrestReport/1": on_arrest,
     }
+
+
+def _cell(name: str) -> tuple[int, int]:
+    parts = name.split("_")
+    try:
+        return (int(parts[1]), int(parts[2]))
+    except (IndexError, ValueError):
+        return (-1, -1)
