@@ -14,18 +14,19 @@ from itertools import count
 
 from cbdi import keys
 from cbdi.beliefs import to_wire
-from cbdi.bus import inputs, publish
+from cbdi.bus import inputs, publish, serve
 from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
-from cbdi.wire.agent import ActionStatus, ArrestReport, EarlyArrest, PartialPlan
+from cbdi.wire.agent import ActionStatus, AgentRequest, ArrestReport, EarlyArrest, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.events import map_beliefs
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
+from cbdi_scheduler.requests import serve_request
 
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
 
@@ -85,6 +86,20 @@ class SchedulerService:
             if isinstance(msg, Percepts):
                 update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
                 await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
+
+    async def on_request(self, key: str, req: AgentRequest) -> Message:
+        """Serve another agent's request (the next cycle reacts to what it changed)."""
+        reply = serve_request(self.mind, req)
+        log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
+        log(
+            "agent_request",
+            from_agent=req.from_agent,
+            group=req.group,
+            op=req.op,
+            accepted=reply.accepted,
+            reason=reply.reason,
+        )
+        return reply
 
     def react(self, msg: Message) -> Reaction:
         mind = self.mind
@@ -149,6 +164,8 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
     async def body(ctx: ServiceContext) -> None:
         service = SchedulerService(ctx, mind)
         stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+        rpc = keys.component_rpc(mind.agent, "scheduler", "request")
+        ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
         ctx.start(service.run(stream, settings.load_map), name="scheduler")
 
     return body

@@ -13,6 +13,8 @@ from cbdi.wire.base import Message
 __all__ = [
     "STEP_STATUSES",
     "ActionStatus",
+    "AgentReply",
+    "AgentRequest",
     "ArrestReport",
     "BeliefsUpdate",
     "Check",
@@ -115,3 +117,29 @@ class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
     reason: str
     time: float
     goal: list[list[str]] = []
+
+
+class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
+    """Another agent asks to check or add a belief or a desire of this agent.
+
+    `op` is `check_belief`, `add_belief`, `check_desire` or `add_desire`; beliefs and goal
+    literals are written as in agent files (`(litter_pose pla61 c_6_1)`). It is served only
+    if `group` is one of this agent's allowed groups.
+    """
+
+    from_agent: str
+    group: str
+    op: str
+    belief: str = ""
+    desire: str = ""
+    goal: list[str] = []
+    priority: float = 0.5
+    deadline: float = 0.0
+
+
+class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
+    """The answer: `accepted` (served, or refused with `reason`) and, for checks, `holds`."""
+
+    accepted: bool
+    holds: bool = False
+    reason: str = ""
