@@ -111,6 +111,14 @@ def test_failed_or_rejected_action_cancels_the_rest() -> None:
     assert statuses(rejected) == [("s0", "failed"), ("s1", "cancelled")]
 
 
+def test_an_invariant_that_already_fails_refuses_the_start() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0, checks=False)), 0)
+    out = start(d, 0.0, FREE.removing([fact("free", "c_1_0")]))
+    assert statuses(out) == [("s0", "refused")] and out.requests == []
+    assert "over all condition (free c_1_0)" in out.statuses[0].reason
+
+
 def test_over_all_violation_is_reported_while_running() -> None:
     d = Dispatcher("r")
     d.load(plan("p", move(0, 0.0)), 0)

@@ -112,11 +112,13 @@ class Dispatcher:
         return last in ids and ids.index(state.step.step_id) > ids.index(last)
 
     def _start(self, state: StepState, now: float, beliefs: BeliefSet, out: Effects) -> None:
-        broken = first_failing(state.step.at_start, beliefs)
+        # An over-all condition that already fails would fail the action as it starts.
+        broken, when = first_failing(state.step.at_start, beliefs), "at start"
+        if broken is None:
+            broken, when = first_failing(state.step.over_all, beliefs), "over all"
         if broken is not None:
-            self._set(
-                state, "refused", f"at start condition {describe(broken)} does not hold", now, out
-            )
+            reason = f"{when} condition {describe(broken)} does not hold"
+            self._set(state, "refused", reason, now, out)
             self._abandon(now, out)
             return
         self._requests += 1
