@@ -7,13 +7,18 @@ the field (`rules[0].then[1].boost.goal[0]`) and what is wrong.
 
 from __future__ import annotations
 
-import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cbdi.agentfile import (
+    AgentFileError,
+    PlanningSettings,
+    RawAgentFile,
+    parse_agent_text,
+    read_agent_file,
+)
 from cbdi.beliefs import Belief
-from cbdi.errors import CbdiError
 from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
@@ -21,32 +26,10 @@ from cbdi_scheduler.rules import ReactiveRule, RuleEffect
 
 __all__ = ["AgentFile", "AgentFileError", "PlanningSettings", "load_agent", "parse_agent"]
 
+# Re-exported: the common parts of agent files live in the common library.
+_SHARED = (AgentFileError, PlanningSettings)
+
 PREEMPTION = ("no_preempt", "preempt", "clean_preempt")
-MODES = ("online", "offline")
-
-
-class AgentFileError(CbdiError):
-    """Reject an agent file, naming the file, the field and the reason."""
-
-    code = "bad_agent_file"
-
-    def __init__(self, path: str, field_name: str, reason: str) -> None:
-        self.path, self.field, self.reason = path, field_name, reason
-        super().__init__(f"{path}: {field_name}: {reason}")
-
-
-@dataclass(frozen=True)
-class PlanningSettings:
-    """How the agent's planner searches (the continual planner's parameters)."""
-
-    mode: str = "online"
-    round_interval: float = 0.5
-    expansions_per_round: int = 200
-    plan_size_limit: int = 8
-    min_commit_steps: int = 1
-    forecast_horizon: int = 0
-    empty_rounds: int = 10
-    backend: str = "cbdi"
 
 
 @dataclass(frozen=True)
@@ -70,24 +53,17 @@ class AgentFile:
 
 def load_agent(path: str | Path, agent: str) -> AgentFile:
     """Read the agent file at `path` for the agent named `agent`."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise AgentFileError(str(p), "file", exc.strerror or str(exc)) from None
-    return parse_agent(text.replace("{self}", agent), str(p), agent, p.parent)
+    return _interpret(read_agent_file(path, agent), agent)
 
 
 def parse_agent(text: str, source: str, agent: str, base: Path) -> AgentFile:
     """Validate agent-file `text` (with `{self}` already replaced)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise AgentFileError(source, "toml", str(exc)) from None
+    return _interpret(parse_agent_text(text, source, base), agent)
+
+
+def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
+    data, source, domain = raw.data, raw.source, raw.domain
     r = _Reader(source, data)
-    domain = base / r.get(data, "domain", str, "domain")
-    if not domain.is_file():
-        raise AgentFileError(source, "domain", f"no such file {domain}")
     bdi = r.table(data, "scheduler")
     preemption = r.choice(bdi, "preemption", PREEMPTION, "clean_preempt", "scheduler")
     return AgentFile(
@@ -107,7 +83,7 @@ def parse_agent(text: str, source: str, agent: str, base: Path) -> AgentFile:
             r.desire(d, f"desires[{i}]") for i, d in enumerate(r.opt(data, "desires", list, []))
         ),
         rules=tuple(r.rule(x, f"rules[{i}]") for i, x in enumerate(r.opt(data, "rules", list, []))),
-        planning=r.planning(r.table(data, "planning")),
+        planning=raw.planning,
     )
 
 
@@ -211,16 +187,3 @@ class _Reader:
             name = self.check(value, str, f"{where}.del_desire")
             return RuleEffect("desire", "DEL", desire=Desire(name=name, goal=()))
         raise self.fail(where, f"unknown effect {kind!r}")
-
-    def planning(self, table: dict[str, Any]) -> PlanningSettings:
-        known = {f.name: f for f in fields(PlanningSettings)}
-        values: dict[str, Any] = {}
-        for key, value in table.items():
-            if key not in known:
-                raise self.fail(f"planning.{key}", f"unknown setting (known: {', '.join(known)})")
-            default = getattr(PlanningSettings(), key)
-            values[key] = self.check(value, type(default), f"planning.{key}")
-        settings = PlanningSettings(**values)
-        if settings.mode not in MODES:
-            raise self.fail("planning.mode", f"expected one of {', '.join(MODES)}")
-        return settings

@@ -59,12 +59,15 @@ def revise_from_outcome(beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet
     return beliefs
 
 
-def map_beliefs(info: WorldInfo, bin_type: str = "bin") -> list[Belief]:
+def map_beliefs(
+    info: WorldInfo, bin_type: str = "bin", litter_type: str = "plastic"
+) -> list[Belief]:
     """Return what an agent believes once it loaded the map (the paper's `map_loaded`).
 
     Every cell that is not a wall is a `cell`, with `near` facts between 4-adjacent ones;
     bins are placed; every cell that holds neither wall nor bin is believed free until
-    sensing says otherwise (people and robots are seen, not known in advance).
+    sensing says otherwise (people and robots are seen, not known in advance). Litter the
+    world marks as known at the start is believed where it lies.
     """
     walls: set[Cell] = {(w[0], w[1]) for w in info.walls}
     bins: dict[Cell, str] = {(b.cell[0], b.cell[1]): b.name for b in info.bins}
@@ -81,4 +84,9 @@ def map_beliefs(info: WorldInfo, bin_type: str = "bin") -> list[Belief]:
             out.append(fact("near", cell_name(c), cell_name(n)))
     for cell, name in bins.items():
         out += [instance(name, bin_type), fact("bin_pose", name, cell_name(cell))]
+    for item in info.known_litter:  # the paper's known litter, given at the start
+        out += [
+            instance(item.name, litter_type),
+            fact("litter_pose", item.name, cell_name((item.cell[0], item.cell[1]))),
+        ]
     return out

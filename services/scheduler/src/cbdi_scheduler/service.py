@@ -82,10 +82,11 @@ class SchedulerService:
         if load_map:
             await self.load_map()  # inputs wait in the stream meanwhile
         async for _, msg in stream:
-            await self.act(self.react(msg))
-            if isinstance(msg, Percepts):
+            reaction = self.react(msg)
+            if isinstance(msg, Percepts):  # beliefs first: the planner plans from them
                 update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
                 await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
+            await self.act(reaction)
 
     async def on_request(self, key: str, req: AgentRequest) -> Message:
         """Serve another agent's request (the next cycle reacts to what it changed)."""

@@ -334,4 +334,9 @@ class World:
             capacity=m.capacity,
             epoch_duration=m.epoch_duration,
             durations=dict(m.durations),
+            known_litter=[
+                LitterView(name=n, cell=c, known=True)
+                for n, (c, known) in m.litter.items()
+                if known
+            ],
         )

@@ -115,6 +115,17 @@ def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessS
 def _agent_spec(
     name: str, kind: str, component: str, scenario: Scenario, env: dict[str, str]
 ) -> ProcessSpec:
+    if kind == "bdi":
+        agent = next(a for a in scenario.agents if a.name == name)
+        script = {
+            "planner": ("cbdi-planner-agent", "cbdi_planner.agent.cli"),
+            "scheduler": ("cbdi-scheduler", "cbdi_scheduler.cli"),
+            "executor": ("cbdi-executor", "cbdi_executor.cli"),
+        }[component]
+        argv = argv_of(console_script(*script), "--agent", name)
+        if component != "executor":
+            argv = argv_of(argv, "--agent-file", str(agent.agent_file))
+        return ProcessSpec(keys.service_id(component, name), argv, env)
     if kind == "scripted":
         argv = argv_of(
             console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli"),

@@ -15,7 +15,8 @@ A scenario lives in `domains/recycling/scenarios/<name>.toml`:
     known_litter = 2
     [[agents]]
     name = "robot1"
-    kind = "scripted"    # which services make up the agent
+    kind = "scripted"    # which services make up the agent: scripted, or bdi with
+    # agent_file = "../agents/recycler.toml"   (planner, scheduler and executor)
     detection_depth = 1
 """
 
@@ -34,7 +35,10 @@ __all__ = ["AGENT_KINDS", "AgentEntry", "RunSettings", "Scenario", "find_scenari
 
 # Components each agent kind runs; the scripted agent stands in for a whole BDI agent and
 # takes the executor's place on the bus.
-AGENT_KINDS: dict[str, tuple[str, ...]] = {"scripted": ("executor",)}
+AGENT_KINDS: dict[str, tuple[str, ...]] = {
+    "scripted": ("executor",),
+    "bdi": ("planner", "scheduler", "executor"),
+}
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,7 @@ class AgentEntry:
     name: str
     kind: str = "scripted"
     detection_depth: int | None = None
+    agent_file: Path | None = None  # a BDI agent's file (planner, scheduler)
 
 
 @dataclass(frozen=True)
@@ -123,7 +128,9 @@ def load_scenario(path: Path) -> Scenario:
     map_path = (path.parent / map_rel).resolve()
     if not map_path.is_file():
         raise ConfigError(where, "map", f"map file {map_path} not found")
-    agents = tuple(_agent(a, i, where) for i, a in enumerate(_get(data, "agents", list, where)))
+    agents = tuple(
+        _agent(a, i, where, path.parent) for i, a in enumerate(_get(data, "agents", list, where))
+    )
     if not agents:
         raise ConfigError(where, "agents", "a scenario needs at least one agent")
     if len({a.name for a in agents}) != len(agents):
@@ -146,7 +153,7 @@ def _get(data: dict[str, Any], field: str, tp: type, where: str) -> Any:
     return value
 
 
-def _agent(raw: Any, index: int, where: str) -> AgentEntry:
+def _agent(raw: Any, index: int, where: str, base: Path) -> AgentEntry:
     field = f"agents[{index}]"
     if not isinstance(raw, dict):
         raise ConfigError(where, field, "expected a table")
@@ -163,7 +170,15 @@ def _agent(raw: Any, index: int, where: str) -> AgentEntry:
     depth = raw.get("detection_depth")
     if depth is not None and (not isinstance(depth, int) or depth < 0):
         raise ConfigError(where, f"{field}.detection_depth", "expected an integer >= 0")
-    return AgentEntry(name=name, kind=kind, detection_depth=depth)
+    agent_file = None
+    if kind == "bdi":
+        rel = raw.get("agent_file")
+        if not isinstance(rel, str):
+            raise ConfigError(where, f"{field}.agent_file", "a bdi agent needs its agent file")
+        agent_file = (base / rel).resolve()
+        if not agent_file.is_file():
+            raise ConfigError(where, f"{field}.agent_file", f"no such file {agent_file}")
+    return AgentEntry(name=name, kind=kind, detection_depth=depth, agent_file=agent_file)
 
 
 def _run(raw: Any, where: str) -> RunSettings:

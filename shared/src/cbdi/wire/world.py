@@ -164,6 +164,7 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     capacity: int
     epoch_duration: float
     durations: dict[str, float]
+    known_litter: list[LitterView] = []  # litter agents know of at the start
 
 
 class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
