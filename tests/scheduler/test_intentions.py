@@ -114,11 +114,15 @@ def test_execution_failures_replan_then_drop() -> None:
     assert s.current is None
 
 
-def test_planning_failures_retry_then_drop() -> None:
+def test_planning_failures_retry_when_beliefs_change_then_drop() -> None:
     s = IntentionScheduler(plan_retries=2)
     s.choose(RECYCLE)
-    assert kinds(s.on_search_failed("no plan")) == ["start_search"]
-    assert kinds(s.on_search_failed("no plan")) == ["start_search"]
+    assert s.retry() == []  # nothing failed: nothing to retry
+    assert s.on_search_failed("no plan") == []  # the same beliefs would fail again
+    retried = s.retry()
+    assert kinds(retried) == ["start_search"] and "no plan" in retried[0].reason
+    assert s.retry() == []  # once
+    assert s.on_search_failed("no plan") == []
     out = s.on_search_failed("no plan")
     assert kinds(out) == ["cancel_search", "drop"] and "planning failed 3 times" in out[-1].reason
 

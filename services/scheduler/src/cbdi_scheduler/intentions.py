@@ -64,6 +64,7 @@ class IntentionScheduler:
         self.pending_plan: PartialPlan | None = None  # waits for the executor to stop
         self.next_desire: Desire | None = None  # waits for a clean preemption
         self.stopping = False
+        self.retry_reason = ""  # a failed search waits for the beliefs to change
 
     # -- desires -------------------------------------------------------------------------
     def choose(self, desire: Desire | None) -> list[Command]:
@@ -93,6 +94,7 @@ class IntentionScheduler:
         return [Command("start_search", desire, reason="goal revised")]
 
     def _start(self, desire: Desire) -> list[Command]:
+        self.retry_reason = ""
         self.current = Intention(desire)
         self.pending_plan = None
         return [Command("start_search", desire)]
@@ -134,14 +136,27 @@ class IntentionScheduler:
         return [Command("execute", cur.desire, plan=plan)]
 
     def on_search_failed(self, reason: str) -> list[Command]:
-        """The planner found no plan: retry, or drop the desire."""
+        """The planner found no plan: retry once the beliefs change, or drop the desire.
+
+        Planning again from the same beliefs would fail the same way (a person blocking
+        the only way is still there): the retry waits for `retry()`.
+        """
         cur = self.current
         if cur is None:
             return []
         cur.plan_failures += 1
         if cur.plan_failures > self.plan_retries:
             return self._drop(f"planning failed {cur.plan_failures} times: {reason}")
-        return [Command("start_search", cur.desire, reason=f"retry after: {reason}")]
+        self.retry_reason = f"retry after: {reason}"
+        return []
+
+    def retry(self) -> list[Command]:
+        """The beliefs changed: start the search a failed planning is waiting for."""
+        cur = self.current
+        if cur is None or not self.retry_reason:
+            return []
+        reason, self.retry_reason = self.retry_reason, ""
+        return [Command("start_search", cur.desire, reason=reason)]
 
     # -- the executor --------------------------------------------------------------------
     def on_status(self, status: ActionStatus) -> list[Command]:

@@ -62,6 +62,8 @@ class Mind:
         if out.beliefs_changed or self.epoch == 0:
             self._fire(out)
         self._deliberate(out)
+        if out.beliefs_changed:
+            out.commands += self.intentions.retry()
         return out
 
     def _fire(self, out: Reaction) -> None:
