@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := shared services/world services/monitor services/scheduler services/executor
+PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner
 PYTEST_ARGS ?=
 
 .PHONY: venv demo test lint bench clean system-tools

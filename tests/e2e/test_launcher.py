@@ -49,6 +49,20 @@ def test_several_agents_share_one_world() -> None:
     assert summary["stats"]["litter_on_ground"] == 0
 
 
+def test_bdi_agent_recycles_everything_in_the_paper_scenario() -> None:
+    """Planner, scheduler and executor processes: the agent senses the litter, takes up the
+    desire, plans with cbdi's planner, executes and recycles all three items."""
+    result = up("paper-7x7-bdi", "--speed", "20", "--json", "--quiet")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "done"
+    robot = summary["stats"]["agents"]["robot1"]
+    assert robot["recycled"] == 3 and robot["pickups"] == 3
+    assert robot["moves"] >= 22  # the paper: 22 moves is the shortest tour
+    assert set(summary["restarts"]) >= {"robot1/planner", "robot1/scheduler", "robot1/executor"}
+    assert not any(summary["restarts"].values())
+
+
 def test_time_limited_run_and_seconds_until() -> None:
     result = up("paper-7x7", "--until", "5", "--speed", "20", "--json", "--quiet")
     assert result.returncode == 0, result.stderr

@@ -1,0 +1,78 @@
+"""Offline search backends: cbdi's own planner, or kairos-planner when it is installed.
+
+Both take the domain and a problem built from the agent's beliefs and return a `Plan`, or
+raise `Unsolvable` / `SearchTimeout` (from `cbdi_planner.errors`).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from cbdi_planner.errors import SearchTimeout, Unsolvable
+from cbdi_planner.grounding import ground
+from cbdi_planner.pddl.ast import Domain, Problem
+from cbdi_planner.plan import Plan, parse_plan
+from cbdi_planner.search import Budget, search
+
+__all__ = ["BACKENDS", "plan_with", "problem_text"]
+
+BACKENDS = ("cbdi", "kairos")
+
+
+def plan_with(
+    backend: str, domain: Domain, domain_file: Path, problem: Problem, seconds: float
+) -> Plan:
+    """Return a plan for `problem` from `backend` within `seconds`."""
+    if backend == "cbdi":
+        result = search(ground(domain, problem), budget=Budget(max_seconds=seconds))
+        if result.plan is not None:
+            return result.plan
+        if result.status == "timeout":
+            raise SearchTimeout(f"no plan within {seconds:g} s")
+        raise Unsolvable(f"no plan reaches the goal ({result.status})")
+    if backend == "kairos":
+        return _kairos(domain_file, problem, seconds)
+    raise ValueError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
+
+
+def _kairos(domain_file: Path, problem: Problem, seconds: float) -> Plan:
+    exe = Path(sys.executable).parent / "kairos"
+    found = str(exe) if exe.exists() else shutil.which("kairos")
+    if found is None:
+        raise ValueError("the kairos backend needs kairos-planner (pip install kairos-planner)")
+    with tempfile.TemporaryDirectory() as tmp:
+        pfile = Path(tmp) / "problem.pddl"
+        pfile.write_text(problem_text(problem))
+        try:
+            done = subprocess.run(
+                [found, str(domain_file), str(pfile), "--timeout", f"{seconds:g}", "--no-anytime"],
+                capture_output=True,
+                text=True,
+                timeout=seconds + 10,
+            )
+        except subprocess.TimeoutExpired:
+            raise SearchTimeout(f"kairos found no plan within {seconds:g} s") from None
+    plan = parse_plan(done.stdout)
+    if len(plan) == 0:
+        raise Unsolvable(f"kairos found no plan: {done.stderr.strip()[-300:]}")
+    return plan
+
+
+def problem_text(problem: Problem) -> str:
+    """Write `problem` as PDDL (objects, init, numeric init, goal literals)."""
+    objects = " ".join(f"{n} - {t[0]}" for n, t in sorted(problem.objects.items()))
+    init = [str(a) for a in problem.init]
+    init += [f"(= ({' '.join((h.name, *h.args))}) {v:g})" for h, v in problem.init_numeric.items()]
+    goal = " ".join(
+        str(g.atom) if g.positive else f"(not {g.atom})"  # type: ignore[union-attr]
+        for g in problem.goal
+    )
+    return (
+        f"(define (problem {problem.name}) (:domain {problem.domain_name})\n"
+        f"  (:objects {objects})\n  (:init {' '.join(init)})\n"
+        f"  (:goal (and {goal})))\n"
+    )

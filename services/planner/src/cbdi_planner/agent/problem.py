@@ -1,0 +1,66 @@
+"""Turn an agent's beliefs and goal into a planning problem over the agent's domain.
+
+Objects are the believed instances whose type the domain knows; the initial state is
+every believed fact and function value the domain declares (anything else the agent
+believes, such as bookkeeping facts of its rules, is left out); the goal is the
+conjunction of the goal atoms.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from cbdi.beliefs import BeliefSet
+from cbdi_planner.pddl.ast import INST, Atom, Domain, FHead, Lit, Problem
+
+__all__ = ["GoalError", "problem_from_beliefs"]
+
+
+class GoalError(ValueError):
+    """A goal atom the domain cannot express (unknown predicate, wrong arity)."""
+
+
+def _check_goal(domain: Domain, goal: Sequence[Sequence[str]]) -> list[Atom]:
+    atoms = []
+    for g in goal:
+        if not g:
+            raise GoalError("an empty goal atom")
+        name, args = g[0], tuple(g[1:])
+        params = domain.predicates.get(name)
+        if params is None:
+            raise GoalError(f"goal ({' '.join(g)}): the domain has no predicate {name!r}")
+        if len(params) != len(args):
+            raise GoalError(f"goal ({' '.join(g)}): {name} takes {len(params)} arguments")
+        atoms.append(Atom(name, args))
+    return atoms
+
+
+def problem_from_beliefs(
+    domain: Domain, beliefs: BeliefSet, goal: Sequence[Sequence[str]], name: str = "beliefs"
+) -> Problem:
+    """Return the problem of reaching `goal` from `beliefs`."""
+    atoms = _check_goal(domain, goal)
+    known_types = set(domain.types) | {"object"}
+    objects: dict[str, tuple[str, ...]] = {
+        n: (t,)
+        for n, t in beliefs.instances.items()
+        if t in known_types and n not in domain.constants
+    }
+    init = [
+        Atom(a[0], tuple(a[1:]))
+        for a in sorted(beliefs.facts)
+        if a[0] in domain.predicates and len(a) - 1 == len(domain.predicates[a[0]])
+    ]
+    numeric = {
+        FHead(a[0], tuple(a[1:])): v
+        for a, v in sorted(beliefs.fluents.items())
+        if a[0] in domain.functions
+    }
+    return Problem(
+        name=name,
+        domain_name=domain.name,
+        objects=objects,
+        init=init,
+        init_numeric=numeric,
+        goal=tuple(Lit(a, True, INST) for a in atoms),
+    )

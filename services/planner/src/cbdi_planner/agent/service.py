@@ -1,0 +1,157 @@
+"""The planner service of one agent, offline mode (plan, then act; the paper's baseline).
+
+It keeps the agent's latest beliefs (from the scheduler), and on a search request plans
+from them to the goal with the chosen backend, in a worker thread so the service keeps
+serving; it publishes the plan as one complete `PartialPlan` whose step times are snapped
+to the world's epoch grid from now on, and reports the search status. A revised goal or a
+new request replaces the search; a cancelled search's late result is dropped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from itertools import count
+
+from msgspec.structs import replace
+
+from cbdi import keys
+from cbdi.agentfile import RawAgentFile
+from cbdi.beliefs import BeliefSet, from_wire
+from cbdi.bus import inputs, publish
+from cbdi.runtime import ServiceContext, ServiceSettings
+from cbdi.runtime.service import ServiceMain
+from cbdi.wire.agent import BeliefsUpdate, PartialPlan
+from cbdi.wire.base import Message
+from cbdi.wire.planner import SearchRequest, SearchStatus
+from cbdi_planner.agent.backends import plan_with
+from cbdi_planner.agent.problem import GoalError, problem_from_beliefs
+from cbdi_planner.agent.steps import plan_steps
+from cbdi_planner.errors import PlannerError
+from cbdi_planner.pddl.ast import Domain
+from cbdi_planner.plan import Plan
+
+__all__ = ["PlannerService", "PlannerSettings", "planner_main"]
+
+INPUTS: tuple[type[Message], ...] = (SearchRequest, BeliefsUpdate)
+
+
+@dataclass(frozen=True)
+class PlannerSettings(ServiceSettings):
+    """Settings of `cbdi-planner serve`."""
+
+    agent: str = field(default="robot1", metadata={"help": "the agent this planner serves"})
+    agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
+    backend: str = field(default="", metadata={"help": "cbdi or kairos (default: agent file)"})
+    time_grid: float = field(default=1.0, metadata={"help": "snap step starts to this grid"})
+
+
+class PlannerService:
+    """Plans for one agent on request."""
+
+    def __init__(
+        self,
+        ctx: ServiceContext,
+        agent: str,
+        domain: Domain,
+        raw: RawAgentFile,
+        backend: str,
+        grid: float,
+    ) -> None:
+        self.ctx, self.agent, self.domain, self.raw = ctx, agent, domain, raw
+        self.backend, self.grid = backend, grid
+        self.beliefs = BeliefSet()
+        self.has_beliefs = False
+        self.deferred: SearchRequest | None = None  # a request that came before any beliefs
+        self.now = 0.0
+        self.request: SearchRequest | None = None
+        self.searching: asyncio.Task[None] | None = None
+        self.plan_ids = count(1)
+
+    def input_keys(self) -> list[str]:
+        return [keys.planner_requests(self.agent), keys.scheduler_beliefs(self.agent)]
+
+    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
+        async for _, msg in stream:
+            if isinstance(msg, BeliefsUpdate) and msg.agent == self.agent:
+                self.beliefs, self.now = from_wire(msg), max(self.now, msg.time)
+                self.has_beliefs = True
+                if self.deferred is not None:
+                    req, self.deferred = self.deferred, None
+                    await self.on_request(req)
+            elif isinstance(msg, SearchRequest) and msg.agent == self.agent:
+                if not self.has_beliefs and msg.kind != "cancel":
+                    self.deferred = msg  # plan from what the agent believes, once it says
+                    continue
+                await self.on_request(msg)
+
+    async def on_request(self, req: SearchRequest) -> None:
+        if self.searching is not None:
+            self.searching.cancel()
+            self.searching = None
+        if req.kind == "cancel":
+            self.request = None
+            await self.status(req.request_id, "cancelled")
+            return
+        if req.kind == "revise" and self.request is not None:
+            req = replace(req, request_id=self.request.request_id)
+        self.request = req
+        await self.status(req.request_id, "searching")
+        self.searching = self.ctx.start(self.search(req), name="search")
+
+    async def search(self, req: SearchRequest) -> None:
+        """Plan from the latest beliefs; publish the plan and the outcome."""
+        seconds = self.raw.planning.timeout
+        try:
+            problem = problem_from_beliefs(self.domain, self.beliefs, req.goal)
+            plan = await asyncio.to_thread(
+                plan_with, self.backend, self.domain, self.raw.domain, problem, seconds
+            )
+        except (GoalError, PlannerError, ValueError) as exc:
+            if self.request is req:
+                self.ctx.log.warning("search_failed", request=req.request_id, error=str(exc))
+                await self.status(req.request_id, "failed", str(exc))
+            return
+        if self.request is not req:
+            return  # replaced or cancelled meanwhile
+        await self.publish_plan(req, plan)
+
+    async def publish_plan(self, req: SearchRequest, plan: Plan) -> None:
+        start = math.floor(self.now / self.grid + 1e-9) * self.grid + self.grid
+        plan_id = f"{self.agent}-plan-{next(self.plan_ids)}"
+        steps = [
+            replace(s, start=round(s.start / self.grid) * self.grid)
+            for s in plan_steps(self.domain, plan, start, plan_id)
+        ]
+        out = PartialPlan(
+            agent=self.agent, plan_id=plan_id, baseline="", steps=steps, complete=True
+        )
+        self.ctx.log.info(
+            "plan", request=req.request_id, plan=plan_id, steps=len(steps), makespan=plan.makespan
+        )
+        await publish(self.ctx.bus, keys.planner_plans(self.agent), out, block=True)
+        await self.status(req.request_id, "done")
+
+    async def status(self, request_id: str, status: str, reason: str = "") -> None:
+        msg = SearchStatus(agent=self.agent, request_id=request_id, status=status, reason=reason)
+        await publish(self.ctx.bus, keys.planner_status(self.agent), msg, block=True)
+
+
+def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -> ServiceMain:
+    """Return the service body of one agent's planner."""
+
+    async def body(ctx: ServiceContext) -> None:
+        backend = settings.backend or raw.planning.backend
+        if raw.planning.mode == "online":
+            ctx.log.warning(
+                "offline_fallback",
+                reason="continual (online) planning is issue "
+                "4; planning offline: complete plan first, then act",
+            )
+        service = PlannerService(ctx, settings.agent, domain, raw, backend, settings.time_grid)
+        stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+        ctx.start(service.run(stream), name="planner")
+
+    return body

@@ -1,0 +1,123 @@
+"""Search nodes and their successors: one happening appended to a partial plan.
+
+A node couples a state with the timeline (STN) of the plan that reached it. A
+successor exists only if the happening is applicable in the state, breaks no running
+invariant and leaves the timeline consistent.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
+from cbdi_planner.state import State, apply_end, apply_start, apply_til
+from cbdi_planner.stn import END, INST, START, TIL, Step, Timeline
+from cbdi_planner.task import Snap, Task
+
+__all__ = ["Expander", "Node"]
+
+
+@dataclass(frozen=True, slots=True)
+class Node:
+    """A search node; `running` pairs each running action with its start step."""
+
+    state: State
+    timeline: Timeline
+    running: tuple[tuple[int, int], ...]
+    h: int
+    helpful: frozenset[tuple[int, int]]
+
+    @property
+    def makespan(self) -> float:
+        """Return the makespan of the partial plan so far."""
+        return self.timeline.makespan
+
+
+class Expander:
+    """Generate and evaluate successors; counts what it does in `generated`/`evaluated`."""
+
+    def __init__(self, task: Task, epsilon: float) -> None:
+        self.task = task
+        self.epsilon = epsilon
+        self.rpg = RelaxedPlanGraph(task)
+        self.generated = 0
+        self.evaluated = 0
+        self.inconsistent = 0
+        self._til_snaps = [
+            Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils
+        ]
+
+    def root(self, state: State) -> Node:
+        """Return the node of `state` with an empty plan (no running actions allowed)."""
+        if state.open:
+            raise ValueError("a search root cannot have running actions")
+        estimate = self.rpg.estimate(state)
+        self.evaluated += 1
+        return Node(state, Timeline(epsilon=self.epsilon), (), estimate.value, estimate.helpful)
+
+    def evaluate(
+        self, state: State, timeline: Timeline, running: tuple[tuple[int, int], ...]
+    ) -> Node:
+        """Build a node, computing its heuristic value."""
+        estimate = self.rpg.estimate(state)
+        self.evaluated += 1
+        return Node(state, timeline, running, estimate.value, estimate.helpful)
+
+    def successors(
+        self, node: Node, helpful_only: bool = False
+    ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
+        """Yield the consistent successors (ends and the next timed literal first)."""
+        state, timeline, task = node.state, node.timeline, self.task
+        for index, start_step in node.running:
+            action = task.actions[index]
+            assert action.end is not None
+            new = apply_end(task, state, action)
+            if new is None:
+                continue
+            begun = timeline.steps[start_step]
+            step = Step(END, index, action.end, start_step, begun.low, begun.high)
+            running = tuple(r for r in node.running if r[0] != index)
+            yield from self._extend(new, timeline, step, running)
+        if state.til < len(task.tils):
+            new = apply_til(task, state)
+            if new is not None:
+                when = task.tils[state.til].time
+                step = Step(TIL, state.til, self._til_snaps[state.til], -1, when, when)
+                yield from self._extend(new, timeline, step, node.running)
+        facts = state.facts
+        for action in task.actions:
+            if action.start.pre & ~facts:
+                continue
+            kind = INST if action.end is None else START
+            if helpful_only and (kind, action.index) not in node.helpful:
+                continue
+            new = apply_start(task, state, action)
+            if new is None:
+                continue
+            if kind == INST:
+                yield from self._extend(
+                    new, timeline, Step(INST, action.index, action.start), node.running
+                )
+                continue
+            low, high = action.duration_bounds(state.nums, self.epsilon)
+            if low > high or high <= 0:
+                continue
+            step = Step(START, action.index, action.start, -1, low, high)
+            running = (*node.running, (action.index, len(timeline.steps)))
+            yield from self._extend(new, timeline, step, tuple(sorted(running)))
+
+    def _extend(
+        self, state: State, timeline: Timeline, step: Step, running: tuple[tuple[int, int], ...]
+    ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
+        extended = timeline.extend(step)
+        self.generated += 1
+        if extended is None:
+            self.inconsistent += 1
+            return
+        yield state, extended, running
+
+    @staticmethod
+    def dead(node: Node) -> bool:
+        """Tell whether the heuristic proved the node a dead end."""
+        return node.h >= INFINITE

@@ -1,0 +1,142 @@
+"""Ground a parsed domain and problem into a `Task`.
+
+Three passes: lifted relaxed reachability finds the action instances worth creating;
+compilation turns them into bitmask snap actions with statics folded away; a ground
+relaxed reachability with snap semantics then drops instances that can never start
+or never end.
+"""
+
+from __future__ import annotations
+
+import math
+
+from cbdi_planner.compile import Compiler, Impossible, _Conj
+from cbdi_planner.errors import Unsolvable
+from cbdi_planner.pddl.ast import INST, Domain, NumEffect, Problem
+from cbdi_planner.reachability import (
+    Objects,
+    _walk_effects,
+    fluent_predicates,
+    reachable_instances,
+)
+from cbdi_planner.task import GroundAction, Task, TimedLiterals
+
+__all__ = ["ground"]
+
+
+def ground(domain: Domain, problem: Problem) -> Task:
+    """Ground `problem`; raise `Unsolvable` if the goal mentions an unreachable fact."""
+    objects = Objects(domain, problem)
+    fluent = fluent_predicates(domain, problem)
+    instances, atoms = reachable_instances(domain, problem, objects, fluent)
+    static_atoms = {(a.predicate, *a.args) for a in problem.init if a.predicate not in fluent}
+    fluent_atoms = {a for a in atoms if a[0] in fluent}
+    changed = {
+        e.head.name
+        for a in domain.actions
+        for e in _walk_effects(a.effects)
+        if isinstance(e, NumEffect)
+    }
+    static_functions = set(domain.functions) - changed
+    compiler = Compiler(
+        objects, static_atoms, fluent_atoms, problem.init_numeric, static_functions, domain.file
+    )
+    actions = []
+    for inst in instances:
+        action = compiler.action(inst, len(actions))
+        if action is not None:
+            actions.append(action)
+    goal = _Conj()
+    try:
+        conds: dict[str, _Conj] = {}
+        compiler.conds(problem.goal, {}, conds, None)
+        goal = conds.get(INST, _Conj())
+    except Impossible as exc:
+        raise Unsolvable(f"goal condition {exc.args[0]} can never hold") from None
+    init_facts = 0
+    for atom in problem.init:
+        index = compiler.fact_index.get((atom.predicate, *atom.args))
+        if index is not None:
+            init_facts |= 1 << index
+    tils = _timed_literals(problem, compiler)
+    nums = [math.nan] * len(compiler.var_index)
+    for key, var in compiler.var_index.items():
+        nums[var] = compiler.init_numeric.get(key, math.nan)
+    task = Task(
+        facts=compiler.facts,
+        num_vars=["(" + " ".join(k) + ")" for k in compiler.var_index],
+        actions=actions,
+        init_facts=init_facts,
+        init_nums=tuple(nums),
+        goal=goal.pre,
+        goal_neg=goal.neg,
+        goal_num=tuple(goal.num),
+        tils=tils,
+        name=problem.name,
+    )
+    task.actions = _prune(task)
+    return task
+
+
+def _timed_literals(problem: Problem, compiler: Compiler) -> list[TimedLiterals]:
+    by_time: dict[float, list[int]] = {}
+    for when, lit in sorted(problem.timed_literals, key=lambda item: item[0]):
+        index = compiler.fact_index.get((lit.atom.predicate, *lit.atom.args))
+        if index is None:
+            continue
+        masks = by_time.setdefault(when, [0, 0])
+        masks[0 if lit.positive else 1] |= 1 << index
+    return [TimedLiterals(t, add, dele) for t, (add, dele) in sorted(by_time.items())]
+
+
+def _prune(task: Task) -> list[GroundAction]:
+    """Keep the actions whose start and end are relaxed-reachable, renumbered.
+
+    Deletes and numeric conditions are ignored, so this never drops a useful action.
+    """
+    reached = task.init_facts
+    for til in task.tils:
+        reached |= til.add
+    live: set[int] = set()
+    changed = True
+    while changed:
+        changed = False
+        for action in task.actions:
+            if action.index in live:
+                continue
+            start = action.start
+            if start.pre & ~reached:
+                continue
+            gained = reached | start.add | _cond_adds(start)
+            if action.end is not None:
+                end = action.end
+                if (action.inv | end.pre) & ~gained:
+                    continue
+                gained |= end.add | _cond_adds(end)
+            live.add(action.index)
+            if gained != reached:
+                reached = gained
+            changed = True
+    kept = [a for a in task.actions if a.index in live]
+    return [_renumber(a, i) for i, a in enumerate(kept)]
+
+
+def _cond_adds(snap: object) -> int:
+    total = 0
+    for ce in getattr(snap, "cond_effects", ()):
+        total |= ce.add
+    return total
+
+
+def _renumber(action: GroundAction, index: int) -> GroundAction:
+    return GroundAction(
+        index,
+        action.name,
+        action.start,
+        action.end,
+        action.inv,
+        action.inv_neg,
+        action.inv_num,
+        action.duration,
+        action.fixed_duration,
+    )
