@@ -1,0 +1,159 @@
+"""searchRound (the paper's Algorithm 1): explore a bounded amount, return the best state.
+
+The open and closed lists live in a `SearchSpace` that survives from round to round, so
+no search progress is lost between rounds (Alg. 1, note after line 14). Two strategies:
+`G`, greedy best-first on helpful actions only (fast, incomplete), and `NG`, best-first on
+every successor (complete). `reroot` moves the space's root to a state a round returned
+(Alg. 2 line 19): the closed list is cleared, only open nodes whose plan starts with the
+new root's plan are kept, and plan sizes count from the new root.
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from cbdi_planner.expansion import Expander, Node
+from cbdi_planner.state import State, is_goal
+from cbdi_planner.stn import END, START
+from cbdi_planner.task import Task
+
+__all__ = ["NG", "G", "Round", "RoundBound", "SearchSpace"]
+
+G, NG = "G", "NG"
+
+
+@dataclass(frozen=True, slots=True)
+class RoundBound:
+    """When a round stops: seconds (INTERVAL), node expansions, and actions in the best
+    state's plan counted from the root (PLAN_SIZE_LIMIT). None: no bound of that kind.
+
+    Expansions make rounds deterministic (tests and experiments); seconds are what a
+    running agent uses.
+    """
+
+    seconds: float | None = None
+    expansions: int | None = None
+    plan_size: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Round:
+    """What one round found: `kind` is `goal` (Alg. 1 line 8), `best` (lines 9-11: the
+    most promising state, possibly the root itself) or `exhausted` (line 16: the open list
+    ran empty). `node` is the goal or best node; `expanded` counts this round only.
+    """
+
+    kind: str
+    node: Node | None
+    expanded: int
+    seconds: float
+    best_h: int
+
+
+def plan_size(node: Node, root_steps: int) -> int:
+    """Return the number of actions started in `node`'s plan after the root."""
+    return sum(1 for s in node.timeline.steps[root_steps:] if s.kind != END)
+
+
+class SearchSpace:
+    """The open and closed lists of one continual search, rooted at `root`."""
+
+    def __init__(
+        self,
+        task: Task,
+        state: State,
+        *,
+        mode: str = G,
+        epsilon: float = 0.001,
+        now: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if mode not in (G, NG):
+            raise ValueError(f"unknown search mode {mode!r} (G or NG)")
+        self.task, self.mode, self.now = task, mode, now
+        self.expander = Expander(task, epsilon)
+        self.root = self.expander.root(state)
+        self.root_steps = 0  # timeline steps before the root (the prefix cut off)
+        self.open: list[tuple[int, int, int, Node]] = []
+        self.closed: set[object] = set()
+        self.counter = 0
+        self.expanded = 0
+        self._push(self.root)
+
+    def _push(self, node: Node) -> None:
+        self.counter += 1
+        heapq.heappush(self.open, (node.h, len(node.timeline.steps), self.counter, node))
+
+    def search_round(self, bound: RoundBound) -> Round:
+        """Run Algorithm 1 from the root until the goal, a bound, or an empty open list."""
+        started, expanded = self.now(), 0
+        best = self.root  # line 1
+        if self.expander.dead(best):
+            self.open.clear()
+        while self.open:  # line 4
+            node = heapq.heappop(self.open)[3]  # line 5
+            key = node.state.key()
+            if key in self.closed:
+                continue
+            self.closed.add(key)
+            if not node.running and node.h < best.h:  # lines 6-7
+                best = node
+            if is_goal(self.task, node.state):  # line 8
+                return self._done("goal", node, expanded, started)
+            if bound.seconds is not None and self.now() - started >= bound.seconds:
+                return self._done("best", best, expanded, started)  # line 9
+            if bound.expansions is not None and expanded >= bound.expansions:
+                return self._done("best", best, expanded, started)
+            if bound.plan_size is not None and plan_size(best, self.root_steps) >= bound.plan_size:
+                return self._done("best", best, expanded, started)  # lines 10-11
+            expanded += 1
+            self._expand(node)  # lines 12-14
+        if best is not self.root:
+            return self._done("best", best, expanded, started)
+        return self._done("exhausted", None, expanded, started)  # line 16
+
+    def _expand(self, node: Node) -> None:
+        """searchCoreLogic: G keeps helpful successors only, NG every successor."""
+        helpful_only = self.mode == G
+        for state, timeline, running in self.expander.successors(node, helpful_only):
+            if state.key() in self.closed:  # needToVisit
+                continue
+            child = self.expander.evaluate(state, timeline, running)
+            if not self.expander.dead(child):
+                self._push(child)
+        self.expanded += 1
+
+    def _done(self, kind: str, node: Node | None, expanded: int, started: float) -> Round:
+        best_h = node.h if node is not None else self.root.h
+        return Round(kind, node, expanded, self.now() - started, best_h)
+
+    def reroot(self, node: Node) -> None:
+        """Alg. 2 line 19: root the search at `node` (a state with no running action)."""
+        if node.running:
+            raise ValueError("cannot re-root on a state with running actions")
+        prefix = node.timeline.steps
+        kept = [
+            entry
+            for entry in self.open
+            if len(entry[3].timeline.steps) > len(prefix)
+            and all(a is b for a, b in zip(entry[3].timeline.steps, prefix, strict=False))
+        ]
+        heapq.heapify(kept)
+        self.open, self.closed = kept, set()
+        self.root, self.root_steps = node, len(prefix)
+        self._push(node)
+
+    def new_steps(self, node: Node) -> range:
+        """Return the indexes of `node`'s timeline steps after the root (its new plan)."""
+        return range(self.root_steps, len(node.timeline.steps))
+
+    def starts_after_root(self, node: Node) -> list[int]:
+        """Return the timeline indexes of actions started after the root."""
+        return [k for k in self.new_steps(node) if node.timeline.steps[k].kind != END]
+
+    @staticmethod
+    def is_start(node: Node, k: int) -> bool:
+        """Tell whether step `k` starts a durative action."""
+        return node.timeline.steps[k].kind == START

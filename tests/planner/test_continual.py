@@ -1,0 +1,164 @@
+"""Continual search (Algorithms 1 and 2), commitment and the failure forecast."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from cbdi_planner.continual import (
+    COMMITTED_FAILS,
+    FAILS_LATER,
+    HOLDS,
+    ImprovedPlan,
+    ModeChanged,
+    Outdated,
+    PartialPlanFound,
+    RoundBound,
+    RoundDone,
+    SearchFailed,
+    SearchThread,
+    commit,
+    forecast,
+)
+from cbdi_planner.grounding import ground
+from cbdi_planner.pddl import parse_domain, parse_problem
+from cbdi_planner.plan import Plan
+from cbdi_planner.search import search
+from cbdi_planner.state import State, initial_state
+from cbdi_planner.task import Task
+
+ROOT = Path(__file__).resolve().parents[2]
+DOMAIN = ROOT / "domains/recycling/pddl/domain.pddl"
+PAPER = ROOT / "domains/recycling/problems/paper-7x7.pddl"
+KAIROS = Path(sys.executable).parent / "kairos"
+
+
+def load(text: str | None = None) -> Task:
+    domain = parse_domain(DOMAIN.read_text(), str(DOMAIN))
+    return ground(domain, parse_problem(text or PAPER.read_text(), domain, str(PAPER)))
+
+
+@pytest.fixture(scope="module")
+def task() -> Task:
+    return load()
+
+
+def run(thread: SearchThread, bound: RoundBound, limit: int = 500) -> list[object]:
+    events: list[object] = []
+    while not thread.finished and limit:
+        events += thread.step(bound)
+        limit -= 1
+    return events
+
+
+def whole(events: list[object]) -> Plan:
+    parts = [e.plan for e in events if isinstance(e, PartialPlanFound)]
+    return Plan(tuple(sorted((a for p in parts for a in p.actions), key=lambda a: a.time)))
+
+
+def kairos_valid(plan: Plan, tmp_path: Path, problem: Path = PAPER) -> None:
+    out = tmp_path / "plan.txt"
+    out.write_text(plan.to_ipc())
+    done = subprocess.run(
+        [str(KAIROS), "validate", str(DOMAIN), str(problem), str(out)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_rounds_hand_out_partial_plans_that_add_up_to_a_valid_plan(
+    task: Task, tmp_path: Path
+) -> None:
+    thread = SearchThread(task, initial_state(task))
+    events = run(thread, RoundBound(expansions=10, plan_size=6))
+    parts = [e for e in events if isinstance(e, PartialPlanFound)]
+    assert len(parts) >= 4  # execution could start long before the plan is complete
+    assert [p.baseline for p in parts] == list(range(len(parts)))
+    assert [p.complete for p in parts] == [False] * (len(parts) - 1) + [True]
+    starts = [p.plan.actions[0].time for p in parts]
+    assert starts == sorted(starts)  # each continues after the previous one
+    kairos_valid(whole(events), tmp_path)
+    rounds = [e for e in events if isinstance(e, RoundDone)]
+    assert all(r.expanded <= 10 for r in rounds)
+
+
+def test_expansion_bounded_rounds_are_deterministic(task: Task) -> None:
+    def plans() -> list[str]:
+        events = run(SearchThread(task, initial_state(task)), RoundBound(expansions=7))
+        return [e.plan.to_ipc() for e in events if isinstance(e, PartialPlanFound)]
+
+    assert plans() == plans()
+
+
+def test_outdated_when_execution_committed_past_the_prefix(task: Task) -> None:
+    thread = SearchThread(task, initial_state(task), prefix=2)
+    assert not any(isinstance(e, Outdated) for e in thread.step(RoundBound(expansions=5), 2))
+    events = thread.step(RoundBound(expansions=5), committed=3)
+    assert isinstance(events[-1], Outdated) and thread.finished
+
+
+def test_greedy_falls_back_to_complete_search_then_reports_unsolvable() -> None:
+    walled = (
+        PAPER.read_text()
+        .replace("(near c_5_0 c_6_0)", "")
+        .replace("(near c_6_0 c_5_0)", "")
+        .replace("(near c_6_2 c_6_3)", "")
+        .replace("(near c_6_3 c_6_2)", "")
+    )
+    thread = SearchThread(load(walled), initial_state(load(walled)))
+    events = run(thread, RoundBound(expansions=50))
+    kinds = [type(e) for e in events if not isinstance(e, RoundDone)]
+    assert kinds == [ModeChanged, SearchFailed]
+    assert "complete search" in events[-1].reason  # type: ignore[attr-defined]
+
+
+def test_improving_mode_sends_only_a_better_plan(task: Task) -> None:
+    events = run(
+        SearchThread(task, initial_state(task), improving=True, improve_on=1000.0),
+        RoundBound(expansions=50),
+    )
+    assert not any(isinstance(e, PartialPlanFound) for e in events)
+    better = [e for e in events if isinstance(e, ImprovedPlan)]
+    assert len(better) == 1 and better[0].plan.makespan < 1000.0
+    events = run(
+        SearchThread(task, initial_state(task), improving=True, improve_on=1.0),
+        RoundBound(expansions=50),
+    )
+    assert not any(isinstance(e, ImprovedPlan) for e in events)
+
+
+def block(task: Task, state: State, cell: str) -> State:
+    return replace(state, facts=state.facts & ~(1 << task.facts.index(f"(free {cell})")))
+
+
+def test_forecast_classifies_failures_by_the_committed_part(task: Task) -> None:
+    plan = search(task).plan
+    assert plan is not None
+    steps = plan.actions
+    assert forecast(task, steps, {}).kind == HOLDS
+    moves = [k for k, a in enumerate(steps) if a.name.startswith("move")]
+    fourth = steps[moves[3]].name.split()[-1]
+    blocked = replace(task, init_facts=block(task, initial_state(task), fourth).facts)
+    later = forecast(blocked, steps, {0: "succeeded", 1: "running"})
+    assert later.kind == FAILS_LATER and later.failed == moves[3]
+    assert f"(free {fourth})" in later.reason
+    assert later.commitment.count == 2 and later.commitment.state is not None
+    soon = forecast(blocked, steps, {0: "succeeded", 1: "running"}, min_commit_steps=5)
+    assert soon.kind == COMMITTED_FAILS
+    short = forecast(blocked, steps, {0: "succeeded", 1: "running"}, horizon=1)
+    assert short.kind == HOLDS  # the refinement: look only one action ahead
+
+
+def test_commit_counts_started_steps_and_simulates_them(task: Task) -> None:
+    plan = search(task).plan
+    assert plan is not None
+    done = commit(task, plan.actions, {0: "succeeded", 1: "succeeded", 2: "running"})
+    assert (done.finished, done.count) == (2, 3)
+    robot_at = plan.actions[2].name.split()[-1]
+    assert done.state is not None
+    assert f"(in robot1 {robot_at})" in task.fact_names(done.state.facts)
