@@ -42,7 +42,7 @@ test: venv system-tools
 lint: venv
 	$(BIN)/ruff check shared services tests benchmarks
 	$(BIN)/mypy --strict shared/src/cbdi
-	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src
+	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py

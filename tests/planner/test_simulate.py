@@ -68,6 +68,6 @@ def test_wrong_durations_and_unknown_actions_are_named(task: Task) -> None:
     wrong = parse_plan("0.000: (move robot1 c_0_1 c_0_2) [2.000]\n")
     assert "duration 2 outside [1, 1]" in simulate(task, wrong).reason
     unknown = parse_plan("0.000: (fly robot1 c_0_1 c_6_6) [1.000]\n")
-    assert "unknown action" in simulate(task, unknown).reason
+    assert "no such action" in simulate(task, unknown).reason
     with pytest.raises(PlanInvalid, match="without reaching the goal"):
         validate(task, parse_plan("0.000: (move robot1 c_0_1 c_0_2) [1.000]\n"))

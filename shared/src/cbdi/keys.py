@@ -34,8 +34,10 @@ __all__ = [
     "executor_arrested",
     "executor_status",
     "monitor_stream",
+    "planner_forecasts",
     "planner_plans",
     "planner_requests",
+    "planner_rounds",
     "planner_status",
     "scheduler_arrest",
     "scheduler_beliefs",
@@ -142,6 +144,16 @@ def planner_plans(agent: str) -> str:
 def planner_status(agent: str) -> str:
     """Return the key on which the planner reports its search status."""
     return agent_stream(agent, "planner", "status")
+
+
+def planner_rounds(agent: str) -> str:
+    """Return the key on which the planner reports each search round's statistics."""
+    return agent_stream(agent, "planner", "rounds")
+
+
+def planner_forecasts(agent: str) -> str:
+    """Return the key on which the planner reports its failure forecasts."""
+    return agent_stream(agent, "planner", "forecasts")
 
 
 def scheduler_desires(agent: str) -> str:

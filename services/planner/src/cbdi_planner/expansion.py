@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
 from cbdi_planner.state import State, apply_end, apply_start, apply_til
-from cbdi_planner.stn import END, INST, START, TIL, Step, Timeline
+from cbdi_planner.stn import END, INST, START, TIL, Future, Step, Timeline
 from cbdi_planner.task import Snap, Task
 
 __all__ = ["Expander", "Node"]
@@ -110,12 +110,25 @@ class Expander:
     def _extend(
         self, state: State, timeline: Timeline, step: Step, running: tuple[tuple[int, int], ...]
     ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
-        extended = timeline.extend(step)
+        extended = timeline.extend(step, self._future(state, running))
         self.generated += 1
         if extended is None:
             self.inconsistent += 1
             return
         yield state, extended, running
+
+    def _future(self, state: State, running: tuple[tuple[int, int], ...]) -> Future:
+        """Return the happenings still to come after a step: running ends, later TILs."""
+        ends = []
+        for index, start_step in running:
+            end = self.task.actions[index].end
+            assert end is not None
+            ends.append((start_step, end))
+        deadlines = tuple(
+            (self.task.tils[j].time, self._til_snaps[j])
+            for j in range(state.til, len(self.task.tils))
+        )
+        return Future(tuple(ends), deadlines)
 
     @staticmethod
     def dead(node: Node) -> bool:

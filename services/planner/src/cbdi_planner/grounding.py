@@ -41,7 +41,7 @@ def ground(domain: Domain, problem: Problem) -> Task:
     compiler = Compiler(
         objects, static_atoms, fluent_atoms, problem.init_numeric, static_functions, domain.file
     )
-    actions = []
+    actions: list[GroundAction] = []
     for inst in instances:
         action = compiler.action(inst, len(actions))
         if action is not None:

@@ -120,7 +120,7 @@ def _happen(
         return ""
     action = by_name.get(step.name)
     if action is None:
-        return "unknown action, or one that can never be applicable in this problem"
+        return "no such action, or its conditions can never hold from this state"
     if kind == _END:
         assert action.end is not None
         after = apply_end(task, sim.state, action)

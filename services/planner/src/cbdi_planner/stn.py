@@ -7,6 +7,12 @@ ordering, so the earliest times computed here are the plan lifted to a partial o
 and compressed. The network is consistent iff the longest-path propagation settles;
 a positive cycle (for instance an end pushed past its maximum duration) makes it
 inconsistent.
+
+Happenings that are certain to come later are checked too, so that a dead end shows
+as soon as it is made rather than when the search finally appends them: the end of
+every running action (it must follow each step it interferes with, yet come within
+its maximum duration of its start) and every timed literal still to happen (each step
+it interferes with must come before its fixed time).
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from dataclasses import dataclass
 
 from cbdi_planner.task import Snap
 
-__all__ = ["END", "INST", "START", "TIL", "Step", "Timeline"]
+__all__ = ["END", "INST", "START", "TIL", "Future", "Step", "Timeline"]
 
 START, END, INST, TIL = 0, 1, 2, 3
 _TOL = 1e-9
@@ -67,8 +73,12 @@ class Timeline:
             (t for t, s in zip(self.times, self.steps, strict=True) if s.kind != TIL), default=0.0
         )
 
-    def extend(self, step: Step) -> Timeline | None:
-        """Return the timeline with `step` appended, or None if it is inconsistent."""
+    def extend(self, step: Step, future: Future | None = None) -> Timeline | None:
+        """Return the timeline with `step` appended, or None if it is inconsistent.
+
+        `future` lists the happenings still to come after `step` (the ends of the
+        actions running after it, the timed literals not yet happened).
+        """
         eps = self.epsilon
         incoming = [(i, eps) for i, old in enumerate(self.steps) if interferes(old.snap, step.snap)]
         if step.kind == END:
@@ -78,7 +88,10 @@ class Timeline:
         times = [*self.times, 0.0]
         n = len(steps) - 1
         times[n] = self._base(step, incoming, times)
-        if not _settle(steps, edges, times, n):
+        waits = _waits(steps, future) if future is not None else ()
+        if not _settle(steps, edges, times, n, waits, eps):
+            return None
+        if future is not None and not _before_deadlines(steps, times, future, eps):
             return None
         return Timeline(steps, edges, tuple(times), eps)
 
@@ -91,13 +104,61 @@ class Timeline:
         return value
 
 
+@dataclass(frozen=True, slots=True)
+class Future:
+    """Happenings certain to come after the steps of a timeline.
+
+    `ends` pairs the start step of each running action with its end snap; `deadlines`
+    pairs the time of each timed literal still to happen with its snap.
+    """
+
+    ends: tuple[tuple[int, Snap], ...] = ()
+    deadlines: tuple[tuple[float, Snap], ...] = ()
+
+
+# (start step, maximum duration, steps the future end must follow)
+_Wait = tuple[int, float, tuple[int, ...]]
+
+
+def _waits(steps: tuple[Step, ...], future: Future) -> tuple[_Wait, ...]:
+    """Return, for each running action, the steps its future end must follow."""
+    out = []
+    for start, end_snap in future.ends:
+        high = steps[start].high
+        if high == math.inf:
+            continue
+        after = tuple(
+            k for k, old in enumerate(steps) if k != start and interferes(old.snap, end_snap)
+        )
+        if after:
+            out.append((start, high, after))
+    return tuple(out)
+
+
+def _before_deadlines(
+    steps: tuple[Step, ...], times: list[float], future: Future, eps: float
+) -> bool:
+    """Tell whether every step a future timed literal interferes with can precede it."""
+    for when, snap in future.deadlines:
+        for k, old in enumerate(steps):
+            if times[k] + eps > when + _TOL and interferes(old.snap, snap):
+                return False
+    return True
+
+
 def _settle(
     steps: tuple[Step, ...],
     edges: tuple[tuple[tuple[int, float], ...], ...],
     times: list[float],
     first: int,
+    waits: tuple[_Wait, ...] = (),
+    eps: float = 0.0,
 ) -> bool:
-    """Propagate earliest times from step `first` on; False on a positive cycle."""
+    """Propagate earliest times from step `first` on; False on a positive cycle.
+
+    A running action whose future end would come too late is started later, as an
+    end already appended would.
+    """
     for _ in range(len(steps) + 1):
         for k in range(first, len(steps)):
             value = times[k]
@@ -113,6 +174,11 @@ def _settle(
             elif step.kind == END and times[k] - times[step.partner] > step.high + _TOL:
                 times[step.partner] = times[k] - step.high
                 lowest = min(lowest, step.partner)
+        for start, high, after in waits:
+            latest = max(times[k] for k in after) + eps
+            if latest - times[start] > high + _TOL:
+                times[start] = latest - high
+                lowest = min(lowest, start)
         if lowest == len(steps):
             return True
         first = lowest

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 __all__ = [
     "CondEffect",
@@ -25,7 +26,7 @@ __all__ = [
 ]
 
 # A compiled numeric expression: ("c", value) | ("v", var) | (op, lhs, rhs).
-NExpr = tuple  # type: ignore[type-arg]
+NExpr = tuple[Any, ...]
 
 
 def eval_expr(expr: NExpr, nums: tuple[float, ...]) -> float:

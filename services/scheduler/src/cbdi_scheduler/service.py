@@ -12,6 +12,8 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from itertools import count
 
+from msgspec.structs import replace
+
 from cbdi import keys
 from cbdi.beliefs import to_wire
 from cbdi.bus import inputs, publish, serve
@@ -56,6 +58,7 @@ class SchedulerService:
         self.ctx, self.mind, self.agent = ctx, mind, mind.agent
         self.search_ids = count(1)
         self.search_id = ""
+        self.last_search: SearchRequest | None = None  # resent when the planner (re)appears
 
     def input_keys(self) -> list[str]:
         a = self.agent
@@ -87,6 +90,16 @@ class SchedulerService:
                 update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
                 await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
             await self.act(reaction)
+
+    async def watch_planner(self) -> None:
+        """Send the search in progress again when the planner appears: a request sent
+        before it subscribed, or to a planner that restarted, would be lost."""
+        token = keys.alive(keys.service_id("planner", self.agent))
+        async for event in self.ctx.bus.watch_alive(token):
+            if event.alive and self.last_search is not None:
+                self.ctx.log.info("search_resent", request=self.last_search.request_id)
+                key = keys.planner_requests(self.agent)
+                await publish(self.ctx.bus, key, self.last_search, block=True)
 
     async def on_request(self, key: str, req: AgentRequest) -> Message:
         """Serve another agent's request (the next cycle reacts to what it changed)."""
@@ -142,15 +155,18 @@ class SchedulerService:
             revise = c.reason == "goal revised" and self.search_id
             if not revise:
                 self.search_id = f"{a}-search-{next(self.search_ids)}"
-            return SearchRequest(
+            req = SearchRequest(
                 agent=a,
                 request_id=self.search_id,
                 kind="revise" if revise else "start",
                 desire=c.desire.name,
                 goal=[list(g.atom) for g in c.desire.goal],
             )
+            self.last_search = replace(req, kind="start")
+            return req
         if c.kind in ("cancel_search", "drop", "achieved") and self.search_id:
             request_id, self.search_id = self.search_id, ""
+            self.last_search = None
             return SearchRequest(agent=a, request_id=request_id, kind="cancel")
         if c.kind == "execute" and c.plan is not None:
             return c.plan
@@ -168,5 +184,6 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
         rpc = keys.component_rpc(mind.agent, "scheduler", "request")
         ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
         ctx.start(service.run(stream, settings.load_map), name="scheduler")
+        ctx.start(service.watch_planner(), name="planner-watch")
 
     return body

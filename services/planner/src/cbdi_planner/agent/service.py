@@ -1,4 +1,7 @@
-"""The planner service of one agent, offline mode (plan, then act; the paper's baseline).
+"""The planner service of one agent: online (continual planning, `ContinualPlanner`) or
+offline (plan, then act; the paper's baseline).
+
+Offline:
 
 It keeps the agent's latest beliefs (from the scheduler), and on a search request plans
 from them to the goal with the chosen backend, in a worker thread so the service keeps
@@ -23,19 +26,21 @@ from cbdi.beliefs import BeliefSet, from_wire
 from cbdi.bus import inputs, publish
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
-from cbdi.wire.agent import BeliefsUpdate, PartialPlan
+from cbdi.wire.agent import ActionStatus, BeliefsUpdate, PartialPlan
 from cbdi.wire.base import Message
-from cbdi.wire.planner import SearchRequest, SearchStatus
+from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.backends import plan_with
+from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.problem import GoalError, problem_from_beliefs
 from cbdi_planner.agent.steps import plan_steps
 from cbdi_planner.errors import PlannerError
 from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan
 
-__all__ = ["PlannerService", "PlannerSettings", "planner_main"]
+__all__ = ["OnlinePlannerService", "PlannerService", "PlannerSettings", "planner_main"]
 
 INPUTS: tuple[type[Message], ...] = (SearchRequest, BeliefsUpdate)
+ONLINE_INPUTS: tuple[type[Message], ...] = (SearchRequest, BeliefsUpdate, ActionStatus)
 
 
 @dataclass(frozen=True)
@@ -46,6 +51,8 @@ class PlannerSettings(ServiceSettings):
     agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
     backend: str = field(default="", metadata={"help": "cbdi or kairos (default: agent file)"})
     time_grid: float = field(default=1.0, metadata={"help": "snap step starts to this grid"})
+    planning: str = field(default="", metadata={"help": "online or offline (default: agent file)"})
+    improve: bool = field(default=True, metadata={"help": "online: look for improved plans"})
 
 
 class PlannerService:
@@ -139,17 +146,117 @@ class PlannerService:
         await publish(self.ctx.bus, keys.planner_status(self.agent), msg, block=True)
 
 
+class OnlinePlannerService:
+    """Continual planning for one agent: rounds in a worker thread, plans as they come."""
+
+    def __init__(self, ctx: ServiceContext, core: ContinualPlanner) -> None:
+        self.ctx, self.core = ctx, core
+        self.has_beliefs = False
+        self.deferred: SearchRequest | None = None
+        self.wake = asyncio.Event()
+
+    def input_keys(self) -> list[str]:
+        agent = self.core.agent
+        return [
+            keys.planner_requests(agent),
+            keys.scheduler_beliefs(agent),
+            keys.executor_status(agent),
+        ]
+
+    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
+        core = self.core
+        async for key, msg in stream:
+            if getattr(msg, "agent", None) != core.agent:
+                continue
+            try:
+                await self.handle(msg)
+            except Exception as exc:
+                self.ctx.log.error("input_failed", key=key, error=f"{type(exc).__name__}: {exc}")
+            if core.search is not None:
+                self.wake.set()
+
+    async def handle(self, msg: Message) -> None:
+        core = self.core
+        if isinstance(msg, BeliefsUpdate):
+            self.has_beliefs = True
+            await self.send(core.on_beliefs(from_wire(msg), msg.time))
+            if self.deferred is not None:
+                req, self.deferred = self.deferred, None
+                await self.start(req)
+        elif isinstance(msg, SearchRequest):
+            if not self.has_beliefs and msg.kind != "cancel":
+                self.deferred = msg  # plan from what the agent believes, once it says
+                return
+            await self.start(msg)
+        elif isinstance(msg, ActionStatus):
+            core.on_status(msg)
+
+    async def start(self, req: SearchRequest) -> None:
+        try:
+            await self.send(self.core.on_request(req))
+        except (GoalError, PlannerError, ValueError) as exc:
+            self.ctx.log.warning("search_failed", request=req.request_id, error=str(exc))
+            await self.send([self.core._status(req.request_id, "failed", str(exc))])
+
+    async def rounds(self) -> None:
+        """Run the search in progress round after round (Alg. 2's loop)."""
+        while True:
+            await self.wake.wait()
+            self.wake.clear()
+            while (search := self.core.search) is not None:
+                try:
+                    events = await asyncio.to_thread(self.core.round, search)
+                except Exception as exc:
+                    self.ctx.log.error("search_error", error=f"{type(exc).__name__}: {exc}")
+                    self.core.search = None
+                    await self.send([self.core._status(search.request_id, "failed", str(exc))])
+                    break
+                await self.send(self.core.after_round(search, events))
+
+    async def send(self, messages: list[Message]) -> None:
+        agent = self.core.agent
+        for msg in messages:
+            if isinstance(msg, PartialPlan):
+                key = keys.planner_plans(agent)
+                self.ctx.log.info(
+                    "plan",
+                    plan=msg.plan_id,
+                    baseline=msg.baseline,
+                    steps=len(msg.steps),
+                    complete=msg.complete,
+                    applies_after=msg.applies_after,
+                )
+            elif isinstance(msg, SearchStatus):
+                key = keys.planner_status(agent)
+            elif isinstance(msg, SearchRound):
+                key = keys.planner_rounds(agent)
+            elif isinstance(msg, ForecastReport):
+                key = keys.planner_forecasts(agent)
+            else:
+                continue
+            await publish(self.ctx.bus, key, msg, block=True)
+
+
 def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -> ServiceMain:
-    """Return the service body of one agent's planner."""
+    """Return the service body of one agent's planner (online or offline)."""
 
     async def body(ctx: ServiceContext) -> None:
         backend = settings.backend or raw.planning.backend
-        if raw.planning.mode == "online":
-            ctx.log.warning(
-                "offline_fallback",
-                reason="continual (online) planning is issue "
-                "4; planning offline: complete plan first, then act",
+        mode = settings.planning or raw.planning.mode
+        if mode == "online":
+            core = ContinualPlanner(
+                settings.agent,
+                domain,
+                raw.planning,
+                settings.time_grid,
+                log=ctx.log.info,
+                improve=settings.improve,
             )
+            online = OnlinePlannerService(ctx, core)
+            stream = inputs(ctx.bus, online.input_keys(), ONLINE_INPUTS, ctx)
+            ctx.start(online.run(stream), name="planner")
+            ctx.start(online.rounds(), name="rounds")
+            return
         service = PlannerService(ctx, settings.agent, domain, raw, backend, settings.time_grid)
         stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         ctx.start(service.run(stream), name="planner")

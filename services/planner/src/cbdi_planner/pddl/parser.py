@@ -21,6 +21,36 @@ __all__ = ["parse_domain", "parse_problem"]
 
 _DURATION_OPS = {"=", "<=", ">="}
 
+# Requirements the planner handles (those that allow `or`/`exists` are accepted here:
+# the parser rejects such a formula where it is used, pointing at it).
+_SUPPORTED_REQUIREMENTS = {
+    ":strips",
+    ":typing",
+    ":negative-preconditions",
+    ":disjunctive-preconditions",
+    ":equality",
+    ":existential-preconditions",
+    ":universal-preconditions",
+    ":quantified-preconditions",
+    ":conditional-effects",
+    ":adl",
+    ":fluents",
+    ":numeric-fluents",
+    ":action-costs",
+    ":durative-actions",
+    ":duration-inequalities",
+    ":timed-initial-literals",
+}
+_UNSUPPORTED_REQUIREMENTS = {
+    ":derived-predicates",
+    ":continuous-effects",
+    ":object-fluents",
+    ":timed-initial-fluents",
+    ":preferences",
+    ":constraints",
+    ":time",
+}
+
 
 def _define(r: Reader, text: str, kind: str) -> tuple[str, SList]:
     """Read `(define (KIND name) ...)` and return the name and the whole list."""
@@ -63,7 +93,7 @@ def parse_domain(text: str, file: str = "<domain>") -> Domain:
 def _domain_section(r: Reader, domain: Domain, key: str, lst: SList) -> None:
     items = lst.items[1:]
     if key == ":requirements":
-        domain.requirements = tuple(r.as_sym(i, "a requirement like :typing") for i in items)
+        domain.requirements = tuple(_requirement(r, item) for item in items)
     elif key == ":types":
         for sym, parents in r.typed_list(items, variables=False):
             r.types[sym.text] = tuple(p for p in parents if p != sym.text)
@@ -93,6 +123,16 @@ def _domain_section(r: Reader, domain: Domain, key: str, lst: SList) -> None:
             ":requirements, :types, :constants, :predicates, :functions, "
             ":action or :durative-action",
         )
+
+
+def _requirement(r: Reader, node: SNode) -> str:
+    """Read one requirement; reject an unknown one and one the planner cannot handle."""
+    name = r.as_sym(node, "a requirement like :typing")
+    if name in _UNSUPPORTED_REQUIREMENTS:
+        raise r.unsupported(node, f"requirement {name} is not supported")
+    if name not in _SUPPORTED_REQUIREMENTS:
+        raise r.syntax(node, f"unknown requirement {name!r}", "a requirement like :typing")
+    return name
 
 
 def _functions(r: Reader, items: tuple[SNode, ...]) -> None:

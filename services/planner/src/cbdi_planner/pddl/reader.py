@@ -168,12 +168,12 @@ class Reader:
                 ) from None
         op = self.head(node)
         if op in _ARITH and len(node.items) >= 2:
-            args = [self.expr(item, scope) for item in node.items[1:]]
-            if len(args) == 1:
-                return BinOp("-", Num(0.0), args[0]) if op == "-" else args[0]
-            result = args[0]
-            for arg in args[1:]:
-                result = BinOp(op, result, arg)
+            operands = [self.expr(item, scope) for item in node.items[1:]]
+            if len(operands) == 1:
+                return BinOp("-", Num(0.0), operands[0]) if op == "-" else operands[0]
+            result = operands[0]
+            for operand in operands[1:]:
+                result = BinOp(op, result, operand)
             return result
         name, args = self.call(node, self.functions, scope, "function")
         return FHead(name, args)

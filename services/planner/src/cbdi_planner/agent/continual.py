@@ -1,0 +1,347 @@
+"""The planner service's online mode: continual planning for one agent (pure core).
+
+`ContinualPlanner` turns inputs (search requests, beliefs, the executor's step statuses)
+into messages to publish, and owns the search in progress (`search`), whose rounds the
+service runs in a worker thread (`round()`, then `after_round()` on the loop).
+
+A *line* is one plan as the executor sees it (one plan id): its partial plans continue
+it (baseline: the plan id). A repair, a revised goal or an improvement starts a new line
+from the committed state (baseline and `applies_after`: the last committed step), which
+the scheduler swaps in with an early arrest.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from itertools import count
+
+from msgspec.structs import replace
+
+from cbdi.agentfile import PlanningSettings
+from cbdi.beliefs import BeliefSet
+from cbdi.wire.agent import ActionStatus, PartialPlan
+from cbdi.wire.base import Message
+from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
+from cbdi_planner.agent.problem import GoalError, problem_from_beliefs
+from cbdi_planner.agent.steps import plan_steps
+from cbdi_planner.continual import (
+    FAILS_LATER,
+    HOLDS,
+    Event,
+    ImprovedPlan,
+    ModeChanged,
+    PartialPlanFound,
+    RoundBound,
+    RoundDone,
+    SearchFailed,
+    SearchThread,
+    commit,
+    forecast,
+)
+from cbdi_planner.errors import PlannerError
+from cbdi_planner.grounding import ground
+from cbdi_planner.pddl.ast import Domain
+from cbdi_planner.plan import Plan, ScheduledAction
+from cbdi_planner.state import State, initial_state
+from cbdi_planner.task import Task
+
+__all__ = ["ContinualPlanner", "Line", "Search"]
+
+Log = Callable[..., None]
+
+
+@dataclass
+class Line:
+    """One plan id's published steps (absolute simulated times) and their statuses."""
+
+    plan_id: str
+    purpose: str
+    origin: float
+    baseline: str = ""
+    applies_after: str = ""
+    steps: list[ScheduledAction] = field(default_factory=list)
+    step_ids: list[str] = field(default_factory=list)
+    statuses: dict[int, str] = field(default_factory=dict)
+    complete: bool = False
+    improved: bool = False
+
+    def makespan_after(self, first: int) -> float:
+        """Return the scheduled span of the steps from index `first` on."""
+        rest = self.steps[first:]
+        if not rest:
+            return 0.0
+        return max(a.time + (a.duration or 0.0) for a in rest) - rest[0].time
+
+
+@dataclass
+class Search:
+    """A search thread and the line it fills (or, improving, may replace)."""
+
+    thread: SearchThread
+    line: Line
+    purpose: str
+    request_id: str
+    repairs: Line | None = None  # the executing line this search continues from
+
+
+class ContinualPlanner:
+    """The continual planner of one agent."""
+
+    def __init__(
+        self,
+        agent: str,
+        domain: Domain,
+        settings: PlanningSettings,
+        grid: float = 1.0,
+        log: Log | None = None,
+        improve: bool = True,
+    ) -> None:
+        self.agent, self.domain, self.settings, self.grid = agent, domain, settings, grid
+        self.log: Log = log or (lambda *a, **k: None)
+        self.improve = improve
+        self.beliefs = BeliefSet()
+        self.now = 0.0
+        self.request: SearchRequest | None = None
+        self.line: Line | None = None
+        self.search: Search | None = None
+        self.last_forecast: tuple[str, str, str] = ("", "", "")
+        self.repair_trigger = ""
+        self.ids = count(1)
+
+    # -- bounds and problems ---------------------------------------------------------------
+    def bound(self) -> RoundBound:
+        s = self.settings
+        return RoundBound(
+            seconds=s.round_interval if s.round_interval > 0 else None,
+            expansions=s.expansions_per_round if s.expansions_per_round > 0 else None,
+            plan_size=s.plan_size_limit if s.plan_size_limit > 0 else None,
+        )
+
+    def task(self, goal: list[list[str]]) -> Task:
+        return ground(self.domain, problem_from_beliefs(self.domain, self.beliefs, goal))
+
+    def next_grid(self, after: float) -> float:
+        return math.floor(after / self.grid + 1e-9) * self.grid + self.grid
+
+    # -- inputs ---------------------------------------------------------------------------
+    def on_request(self, req: SearchRequest) -> list[Message]:
+        """Start, revise (the union of goals) or cancel the search."""
+        if req.kind == "cancel":
+            self.request, self.search, self.line = None, None, None
+            return [self._status(req.request_id, "cancelled")]
+        same = self.request is not None and req.request_id == self.request.request_id
+        if (
+            req.kind == "start"
+            and same
+            and self.request is not None
+            and [list(g) for g in req.goal] == [list(g) for g in self.request.goal]
+        ):
+            return []  # the same request again (sent when we appeared): on it already
+        if req.kind == "revise" and self.request is not None:
+            goal = [list(g) for g in self.request.goal]
+            goal += [list(g) for g in req.goal if list(g) not in goal]
+            req = replace(req, request_id=self.request.request_id, goal=goal)
+            self.request = req
+            if self.line is not None and self.line.steps:
+                return self._from_committed("revise", self.task(req.goal))
+        self.request = replace(req, kind="start")
+        self.line, self.last_forecast, self.repair_trigger = None, ("", "", ""), ""
+        task = self.task(req.goal)
+        line = Line(self._plan_id(), "new", self.next_grid(self.now))
+        self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
+        return [self._status(req.request_id, "searching")]
+
+    def on_status(self, status: ActionStatus) -> None:
+        """Record a step's status for the commitment and the forecast."""
+        for line in (self.line, self.search.repairs if self.search else None):
+            if (
+                line is not None
+                and status.plan_id == line.plan_id
+                and status.step_id in line.step_ids
+            ):
+                line.statuses[line.step_ids.index(status.step_id)] = status.status
+
+    def on_beliefs(self, beliefs: BeliefSet, now: float) -> list[Message]:
+        """New beliefs: forecast the executing plan's failure and act on it."""
+        self.beliefs, self.now = beliefs, max(self.now, now)
+        line, req = self.line, self.request
+        if line is None or req is None or not line.steps:
+            return []
+        if self.search is not None and self.search.purpose in ("repair", "revise"):
+            return []  # a repair is on its way
+        try:
+            task = self.task(req.goal)
+        except (GoalError, PlannerError) as exc:
+            # Nothing reaches the goal from these beliefs (a robot boxed in by people):
+            # no repair can help now; the executing plan goes on until it fails.
+            self.log("forecast_skipped", plan=line.plan_id, reason=str(exc))
+            return []
+        fc = forecast(
+            task,
+            line.steps,
+            line.statuses,
+            min_commit_steps=self.settings.min_commit_steps,
+            horizon=self.settings.forecast_horizon,
+        )
+        failed = line.step_ids[fc.failed] if fc.failed is not None else ""
+        out: list[Message] = []
+        key = (fc.kind, failed, fc.reason)
+        if key != self.last_forecast:
+            self.last_forecast = key
+            done = fc.commitment.count
+            out.append(
+                ForecastReport(
+                    agent=self.agent,
+                    plan_id=line.plan_id,
+                    kind=fc.kind,
+                    failed_step=failed,
+                    reason=fc.reason,
+                    committed=line.step_ids[done - 1] if done else "",
+                    time=self.now,
+                )
+            )
+        if fc.kind == FAILS_LATER and f"{failed}:{fc.reason}" != self.repair_trigger:
+            self.repair_trigger = f"{failed}:{fc.reason}"
+            self.log("forecast_failure", plan=line.plan_id, step=failed, reason=fc.reason)
+            out += self._from_committed("repair", task)
+        elif (
+            fc.kind == HOLDS
+            and self.improve
+            and line.complete
+            and not line.improved
+            and self.search is None
+            and fc.commitment.state is not None
+        ):
+            line.improved = True
+            rest = line.makespan_after(fc.commitment.count)
+            out += self._from_committed("improve", task, improve_on=rest)
+        return out
+
+    def _from_committed(
+        self, purpose: str, task: Task, improve_on: float = math.inf
+    ) -> list[Message]:
+        """Start a search from the committed state of the executing line."""
+        line, req = self.line, self.request
+        assert line is not None and req is not None
+        done = commit(task, line.steps, line.statuses, self.settings.min_commit_steps)
+        state: State | None = done.state
+        if state is None:
+            self.log("commit_failed", plan=line.plan_id, reason=done.reason)
+            return []
+        after = line.step_ids[done.count - 1] if done.count else ""
+        ends = [a.time + (a.duration or 0.0) for a in line.steps[: done.count]]
+        origin = self.next_grid(max([self.now, *ends]) - 1e-9)
+        new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
+        thread = self._thread(
+            task, state, prefix=done.count, improving=purpose == "improve", improve_on=improve_on
+        )
+        self.search = Search(thread, new, purpose, req.request_id, repairs=line)
+        self.log("search_from_committed", purpose=purpose, plan=new.plan_id, after=after)
+        return []
+
+    def _thread(self, task: Task, state: State, **kw: object) -> SearchThread:
+        return SearchThread(task, state, empty_rounds=self.settings.empty_rounds, **kw)  # type: ignore[arg-type]
+
+    # -- rounds ---------------------------------------------------------------------------
+    def round(self, search: Search) -> list[Event]:
+        """Run one round of `search` (call from a worker thread)."""
+        return search.thread.step(self.bound())
+
+    def after_round(self, search: Search, events: list[Event]) -> list[Message]:
+        """Turn a round's events into messages; drop a search replaced meanwhile."""
+        if search is not self.search:
+            return []
+        out: list[Message] = []
+        if search.repairs is not None:
+            old = search.repairs
+            started = sum(1 for s in old.statuses.values() if s in ("running", "succeeded"))
+            if started > search.thread.prefix:
+                # Alg. 2 line 9: execution committed past this search's prefix.
+                self.log("outdated", plan=search.line.plan_id, purpose=search.purpose)
+                self.search, self.repair_trigger = None, ""
+                self.last_forecast = ("", "", "")
+                return [self._round(search, e) for e in events if isinstance(e, RoundDone)]
+        for event in events:
+            if isinstance(event, RoundDone):
+                out.append(self._round(search, event))
+            elif isinstance(event, PartialPlanFound):
+                out.append(self._publish(search, event.plan, event.complete))
+                if event.complete:
+                    out.append(self._status(search.request_id, "done"))
+            elif isinstance(event, ImprovedPlan):
+                improved = Plan(event.plan.actions)
+                self.log(
+                    "improved",
+                    plan=search.line.plan_id,
+                    makespan=improved.makespan,
+                    than=event.than,
+                )
+                out.append(self._publish(search, improved, True))
+            elif isinstance(event, ModeChanged):
+                self.log("fall_back", plan=search.line.plan_id, mode=event.mode)
+            elif isinstance(event, SearchFailed):
+                out += self._failed(search, event.reason)
+        if search.thread.finished and self.search is search:
+            self.search = None
+        return out
+
+    def _failed(self, search: Search, reason: str) -> list[Message]:
+        self.search = None
+        if search.purpose in ("repair", "improve") and self.line is not None:
+            self.log("repair_failed", plan=search.line.plan_id, reason=reason)
+            return []  # the executing plan goes on; execution reports if it fails
+        return [self._status(search.request_id, "failed", reason)]
+
+    def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
+        line = search.line
+        first = len(line.steps)
+        if search.purpose != "new" and first == 0:
+            self.line = line  # the new line takes over from the committed point
+            self.last_forecast = ("", "", "")
+            self.repair_trigger = ""
+        elif self.line is None:
+            self.line = line
+        steps = plan_steps(self.domain, plan, line.origin, line.plan_id)
+        out_steps = []
+        for k, (scheduled, step) in enumerate(zip(plan.actions, steps, strict=True)):
+            start = round((line.origin + scheduled.time) / self.grid) * self.grid
+            step_id = f"{line.plan_id}-{first + k + 1}"
+            out_steps.append(replace(step, step_id=step_id, start=start))
+            line.steps.append(
+                ScheduledAction(line.origin + scheduled.time, scheduled.name, scheduled.duration)
+            )
+            line.step_ids.append(step_id)
+        line.complete = complete
+        baseline = line.baseline if first == 0 else line.plan_id
+        return PartialPlan(
+            agent=self.agent,
+            plan_id=line.plan_id,
+            baseline=baseline,
+            steps=out_steps,
+            complete=complete,
+            applies_after=line.applies_after if first == 0 else "",
+        )
+
+    def _round(self, search: Search, r: RoundDone) -> SearchRound:
+        return SearchRound(
+            agent=self.agent,
+            request_id=search.request_id,
+            plan_id=search.line.plan_id,
+            purpose=search.purpose,
+            number=r.number,
+            kind=r.kind,
+            mode=r.mode,
+            expanded=r.expanded,
+            seconds=r.seconds,
+            best_h=r.best_h if r.best_h < 10**9 else -1,
+            plan_actions=r.plan_actions,
+            time=self.now,
+        )
+
+    def _status(self, request_id: str, status: str, reason: str = "") -> SearchStatus:
+        return SearchStatus(agent=self.agent, request_id=request_id, status=status, reason=reason)
+
+    def _plan_id(self) -> str:
+        return f"{self.agent}-plan-{next(self.ids)}"
