@@ -42,6 +42,7 @@ class Mind:
         self.intentions = IntentionScheduler(spec.preemption, spec.plan_retries, spec.exec_retries)
         self.now = 0.0
         self.epoch = -1
+        self.refire = False  # fire the rules next cycle even if nothing changed
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -59,7 +60,10 @@ class Mind:
         before = self.beliefs
         self.beliefs = revise_from_percepts(self.beliefs, p)
         out = Reaction(beliefs_changed=self.beliefs != before)
-        if out.beliefs_changed or self.epoch == 0:
+        if out.beliefs_changed or self.epoch == 0 or self.refire:
+            # After a drop the rules fire again even on unchanged beliefs: what made the
+            # desire (litter still lying there) may well make it again.
+            self.refire = False
             self._fire(out)
         self._deliberate(out)
         if out.beliefs_changed:
@@ -83,6 +87,7 @@ class Mind:
         for drop in drops(self.desires, self.beliefs, self.now, active):
             desire = self.desires.pop(drop.desire)
             out.events.append(self.event(desire, "dropped", drop.reason))
+            self.refire = True
             if drop.desire == active:
                 out.commands += self.intentions.drop(drop.reason)
         for name, d in list(self.desires.items()):
@@ -122,4 +127,5 @@ class Mind:
             if c.kind == "drop" and c.desire is not None:
                 self.desires.pop(c.desire.name, None)
                 out.events.append(self.event(c.desire, "dropped", c.reason))
+                self.refire = True
         return out

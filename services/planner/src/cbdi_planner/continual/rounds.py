@@ -102,17 +102,24 @@ class SearchSpace:
                 best = node
             if is_goal(self.task, node.state):  # line 8
                 return self._done("goal", node, expanded, started)
-            if bound.seconds is not None and self.now() - started >= bound.seconds:
-                return self._done("best", best, expanded, started)  # line 9
-            if bound.expansions is not None and expanded >= bound.expansions:
+            if self._bound_hit(bound, best, expanded, started):  # lines 9-11
+                # `node` is not expanded yet: it stays open for the next round.
+                self.closed.discard(key)
+                self._push(node)
                 return self._done("best", best, expanded, started)
-            if bound.plan_size is not None and plan_size(best, self.root_steps) >= bound.plan_size:
-                return self._done("best", best, expanded, started)  # lines 10-11
             expanded += 1
             self._expand(node)  # lines 12-14
         if best is not self.root:
             return self._done("best", best, expanded, started)
         return self._done("exhausted", None, expanded, started)  # line 16
+
+    def _bound_hit(self, bound: RoundBound, best: Node, expanded: int, started: float) -> bool:
+        if bound.seconds is not None and self.now() - started >= bound.seconds:
+            return True  # line 9: INTERVAL
+        if bound.expansions is not None and expanded >= bound.expansions:
+            return True
+        limit = bound.plan_size  # lines 10-11: PLAN_SIZE_LIMIT
+        return limit is not None and plan_size(best, self.root_steps) >= limit
 
     def _expand(self, node: Node) -> None:
         """searchCoreLogic: G keeps helpful successors only, NG every successor."""

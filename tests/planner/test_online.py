@@ -1,0 +1,144 @@
+"""The planner service's online core: partial plans, forecast, repair, revise, outdated."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+from cbdi.agentfile import PlanningSettings
+from cbdi.beliefs import BeliefSet
+from cbdi.wire.agent import ActionStatus, PartialPlan
+from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
+from cbdi_planner.agent.continual import ContinualPlanner
+from cbdi_planner.pddl import parse_domain
+
+ROOT = Path(__file__).resolve().parents[2]
+DOMAIN = parse_domain((ROOT / "domains/recycling/pddl/domain.pddl").read_text(), "domain.pddl")
+W = 5  # a 5x1 corridor: bin at c_0_0, robot at c_1_0, litter at c_4_0
+
+
+def beliefs(robot: str = "c_1_0", blocked: tuple[str, ...] = ()) -> BeliefSet:
+    cells = [f"c_{x}_0" for x in range(W)]
+    facts: list[tuple[str, ...]] = [("map_loaded",), ("in", "robot1", robot)]
+    facts += [("near", a, b) for a, b in itertools.pairwise(cells)]
+    facts += [("near", b, a) for a, b in itertools.pairwise(cells)]
+    facts += [("free", c) for c in cells[1:] if c != robot and c not in blocked]
+    facts += [("bin_pose", "bin1", "c_0_0"), ("litter_pose", "p1", "c_4_0")]
+    facts += [("litter_pose", "p2", "c_3_0")]
+    instances = {"robot1": "robot", "bin1": "bin", "p1": "plastic", "p2": "plastic"}
+    instances.update({c: "cell" for c in cells})
+    fluents = {("loaded_amount", "robot1"): 0.0, ("detection_depth", "robot1"): 1.0}
+    return BeliefSet(instances=instances, facts=frozenset(facts), fluents=fluents)
+
+
+def planner(**kw: object) -> ContinualPlanner:
+    settings = PlanningSettings(round_interval=0, expansions_per_round=3, plan_size_limit=2, **kw)  # type: ignore[arg-type]
+    core = ContinualPlanner("robot1", DOMAIN, settings, improve=False)
+    core.on_beliefs(beliefs(), 0.0)
+    return core
+
+
+def request(kind: str = "start", goal: tuple[str, ...] = ("p1",)) -> SearchRequest:
+    return SearchRequest(
+        agent="robot1",
+        request_id="s1",
+        kind=kind,
+        desire="recycle",
+        goal=[["recycled", g] for g in goal],
+    )
+
+
+def drain(core: ContinualPlanner, limit: int = 200) -> list[object]:
+    out: list[object] = []
+    while core.search is not None and limit:
+        search = core.search
+        out += core.after_round(search, core.round(search))
+        limit -= 1
+    return out
+
+
+def test_partial_plans_continue_one_plan_until_complete() -> None:
+    core = planner()
+    assert isinstance(core.on_request(request())[0], SearchStatus)
+    out = drain(core)
+    plans = [m for m in out if isinstance(m, PartialPlan)]
+    assert len(plans) >= 2 and plans[-1].complete and not any(p.complete for p in plans[:-1])
+    assert plans[0].baseline == "" and all(p.baseline == plans[0].plan_id for p in plans[1:])
+    ids = [s.step_id for p in plans for s in p.steps]
+    assert ids == [f"{plans[0].plan_id}-{k}" for k in range(1, len(ids) + 1)]
+    starts = [s.start for p in plans for s in p.steps]
+    assert starts == sorted(starts) and starts[0] >= 1.0  # from the next epoch on
+    assert any(isinstance(m, SearchRound) for m in out)
+    assert [m.status for m in out if isinstance(m, SearchStatus)] == ["done"]
+    assert core.on_request(request()) == []  # the same request again: already on it
+
+
+def run_first_steps(core: ContinualPlanner, n: int) -> PartialPlan:
+    core.on_request(request())
+    plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    first = plans[0]
+    line = core.line
+    assert line is not None
+    for k in range(n):
+        core.on_status(
+            ActionStatus(
+                agent="robot1",
+                plan_id=first.plan_id,
+                step_id=line.step_ids[k],
+                action="move",
+                status="succeeded" if k < n - 1 else "running",
+                reason="",
+                time=float(k),
+            )
+        )
+    return first
+
+
+def test_a_forecast_failure_after_the_committed_part_starts_a_repair() -> None:
+    core = planner()
+    first = run_first_steps(core, 1)  # moving c_1_0 -> c_2_0
+    assert core.on_beliefs(beliefs(), 0.5) and core.search is None  # holds: reported once
+    out = core.on_beliefs(beliefs(blocked=("c_3_0",)), 1.0)  # someone stands ahead
+    report = next(m for m in out if isinstance(m, ForecastReport))
+    assert report.kind == "fails_after_committed" and report.failed_step == f"{first.plan_id}-2"
+    assert report.committed == f"{first.plan_id}-1"
+    assert core.search is not None and core.search.purpose == "repair"
+    repair = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    # The person blocks the only way: no repair exists, the executing plan goes on.
+    assert repair == [] and core.line is not None and core.line.plan_id == first.plan_id
+
+
+def test_a_revised_goal_replaces_the_plan_after_the_committed_step() -> None:
+    core = planner()
+    first = run_first_steps(core, 1)
+    assert core.on_request(request("revise", ("p2",))) == []
+    assert core.search is not None and core.search.purpose == "revise"
+    plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert plans and plans[0].plan_id != first.plan_id
+    assert plans[0].applies_after == f"{first.plan_id}-1" == plans[0].baseline
+    names = [" ".join([s.action, *s.args]) for p in plans for s in p.steps]
+    assert any("p1" in n for n in names) and any("p2" in n for n in names)  # the union
+    assert plans[-1].complete
+
+
+def test_a_repair_is_dropped_when_execution_commits_past_it() -> None:
+    core = planner()
+    first = run_first_steps(core, 1)
+    core.on_request(request("revise", ("p2",)))
+    search = core.search
+    assert search is not None
+    line = search.repairs
+    assert line is not None
+    core.on_status(
+        ActionStatus(
+            agent="robot1",
+            plan_id=first.plan_id,
+            step_id=line.step_ids[1],
+            action="move",
+            status="running",
+            reason="",
+            time=1.0,
+        )
+    )
+    out = core.after_round(search, core.round(search))
+    assert core.search is None and not any(isinstance(m, PartialPlan) for m in out)
