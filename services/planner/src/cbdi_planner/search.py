@@ -173,7 +173,8 @@ def search(
             if anytime:
                 _improve(ex, root, clock, result, on_plan)
     except SearchTimeout:
-        pass
+        # The budget ran out: "timeout" unless a plan was found (anytime: the best so far).
+        result.status = "solved" if result.plan is not None else "timeout"
     stats.generated, stats.evaluated = ex.generated, ex.evaluated
     stats.inconsistent = ex.inconsistent
     stats.seconds = clock.elapsed()

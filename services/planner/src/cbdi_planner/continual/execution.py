@@ -85,15 +85,14 @@ def commit(
     while count < len(steps) and statuses.get(count) in STARTED:
         count += 1
     count = min(len(steps), max(count, finished + min_commit_steps))
-    state: State | None = State(task.init_facts, task.init_nums)
+    state = State(task.init_facts, task.init_nums)
     for k in range(finished, count):
         if statuses.get(k) in STARTED:
-            state = _force(task, state, steps[k].name) if state else None
-            if state is None:
+            forced = _force(task, state, steps[k].name)
+            if forced is None:
                 return Commitment(count, finished, None, f"({steps[k].name}) is not applicable")
+            state = forced
             continue
-        if state is None:
-            break
         sim = simulate(task, Plan((steps[k],)), state)
         if not sim.ok:
             return Commitment(count, finished, None, f"({steps[k].name}): {sim.reason}")

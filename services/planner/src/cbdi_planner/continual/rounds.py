@@ -152,6 +152,13 @@ class SearchSpace:
         self.root, self.root_steps = node, len(prefix)
         self._push(node)
 
+    def restart(self, mode: str, root: Node) -> None:
+        """Search again in `mode` from `root` (a node of this space) with empty lists."""
+        self.mode, self.root = mode, root
+        self.root_steps = len(root.timeline.steps)
+        self.open, self.closed = [], set()
+        self._push(root)
+
     def new_steps(self, node: Node) -> range:
         """Return the indexes of `node`'s timeline steps after the root (its new plan)."""
         return range(self.root_steps, len(node.timeline.steps))

@@ -188,19 +188,9 @@ class SearchThread:
         if self.mode == G:
             self.mode = NG
             self.empty = 0
-            if self.sent:
-                # Partial plans are out: the complete search continues after them.
-                root = self.space.root
-                self.space = SearchSpace(
-                    self.task, root.state, mode=NG, epsilon=self.epsilon, now=self.now
-                )
-                self.space.root = root
-                self.space.open = [(root.h, len(root.timeline.steps), 0, root)]
-                self.space.root_steps = len(root.timeline.steps)
-            else:
-                self.space = SearchSpace(
-                    self.task, self.state, mode=NG, epsilon=self.epsilon, now=self.now
-                )
+            # Partial plans already out stay: the complete search continues after them;
+            # otherwise it starts over from the committed state (lines 13-14).
+            self.space.restart(NG, self.space.root if self.sent else self.origin)
             return [ModeChanged(NG)]
         self.mode = UNSAT
         self.finished = True
