@@ -5,11 +5,14 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+import pytest
+
 from cbdi.agentfile import PlanningSettings
 from cbdi.beliefs import BeliefSet
 from cbdi.wire.agent import ActionStatus, PartialPlan
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.continual import ContinualPlanner
+from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
 from cbdi_planner.pddl import parse_domain
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -142,3 +145,72 @@ def test_a_repair_is_dropped_when_execution_commits_past_it() -> None:
     )
     out = core.after_round(search, core.round(search))
     assert core.search is None and not any(isinstance(m, PartialPlan) for m in out)
+
+
+# -- bad input: each is refused with an error naming what and where ------------------------
+CORRIDOR = """(define (problem corridor) (:domain recycling)
+  (:objects robot1 - robot bin1 - bin p1 - plastic c_0_0 c_1_0 c_2_0 - cell)
+  (:init (map_loaded) (in robot1 c_1_0) (free c_0_0) (free c_2_0)
+         (near c_0_0 c_1_0) (near c_1_0 c_0_0) (near c_1_0 c_2_0) (near c_2_0 c_1_0)
+         (bin_pose bin1 c_0_0) (litter_pose p1 c_2_0)
+         (= (loaded_amount robot1) 0) (= (detection_depth robot1) 1))
+  (:goal (and (recycled p1))))
+"""
+
+
+def test_a_request_may_carry_its_own_pddl_problem() -> None:
+    settings = PlanningSettings(round_interval=0, expansions_per_round=50)
+    core = ContinualPlanner("robot1", DOMAIN, settings, improve=False)
+    out = core.on_request(
+        SearchRequest(agent="robot1", request_id="s1", kind="start", problem=CORRIDOR)
+    )
+    assert [m.status for m in out if isinstance(m, SearchStatus)] == ["searching"]
+    assert core.request is not None and core.request.goal == [["recycled", "p1"]]
+    plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert plans and plans[-1].complete
+    actions = [s.action for p in plans for s in p.steps]
+    assert actions == ["move", "litter_pickup", "move", "recycle"]
+
+
+def test_a_problem_that_does_not_parse_is_refused_with_its_position() -> None:
+    core = planner()
+    broken = CORRIDOR.replace("(:goal (and (recycled p1))))", "(:goal (and (recycled p1)")
+    with pytest.raises(BadRequestError, match=r"request s9:\d+:\d+") as err:
+        core.on_request(
+            SearchRequest(agent="robot1", request_id="s9", kind="start", problem=broken)
+        )
+    assert err.value.code == "bad_request"
+    assert core.search is None and ("in", "robot1", "c_1_0") in core.beliefs.facts
+
+
+def test_a_goal_over_an_unknown_predicate_is_refused() -> None:
+    core = planner()
+    req = SearchRequest(agent="robot1", request_id="s2", kind="start", goal=[["shiny", "p1"]])
+    with pytest.raises(BadRequestError, match="no predicate 'shiny'"):
+        core.on_request(req)
+    assert core.search is None
+    core.on_request(request())  # and the next good request is served
+    assert core.search is not None
+
+
+def test_a_status_for_a_plan_never_published_is_refused() -> None:
+    core = planner()
+    core.on_request(request())
+    drain(core)
+    with pytest.raises(UnknownPlanError, match="robot9-plan-1"):
+        core.on_status(status("robot9-plan-1", "robot9-plan-1-1", "running"))
+    assert core.line is not None
+    core.on_status(status(core.line.plan_id, core.line.step_ids[0], "running"))
+    assert core.line.statuses == {0: "running"}
+
+
+def status(plan_id: str, step_id: str, what: str) -> ActionStatus:
+    return ActionStatus(
+        agent="robot1",
+        plan_id=plan_id,
+        step_id=step_id,
+        action="move",
+        status=what,
+        reason="",
+        time=0.0,
+    )

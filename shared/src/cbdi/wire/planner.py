@@ -23,6 +23,9 @@ class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
     """Start a search for `goal` from the agent's current beliefs, revise its goal, or cancel.
 
     `goal` holds ground atoms (`["recycled", "pla61"]`) that must all hold at the end.
+    `problem`, if given, is a PDDL problem over the agent's domain: its objects and initial
+    state replace the agent's beliefs (until the next belief update), and its goal is the
+    goal when `goal` is empty. It lets a user drive one planner service directly.
     """
 
     agent: str
@@ -30,6 +33,7 @@ class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
     kind: str
     desire: str = ""
     goal: list[list[str]] = []
+    problem: str = ""
 
 
 class SearchStatus(Message, frozen=True, tag="cbdi.planner.SearchStatus/1"):

@@ -24,7 +24,13 @@ from cbdi.beliefs import BeliefSet
 from cbdi.wire.agent import ActionStatus, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
-from cbdi_planner.agent.problem import GoalError, problem_from_beliefs
+from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
+from cbdi_planner.agent.problem import (
+    GoalError,
+    beliefs_from_problem,
+    goal_of,
+    problem_from_beliefs,
+)
 from cbdi_planner.agent.steps import plan_steps
 from cbdi_planner.continual import (
     FAILS_LATER,
@@ -42,6 +48,7 @@ from cbdi_planner.continual import (
 )
 from cbdi_planner.errors import PlannerError
 from cbdi_planner.grounding import ground
+from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan, ScheduledAction
 from cbdi_planner.state import State, initial_state
@@ -109,6 +116,7 @@ class ContinualPlanner:
         self.last_forecast: tuple[str, str, str] = ("", "", "")
         self.repair_trigger = ""
         self.ids = count(1)
+        self.published: set[str] = set()  # every plan id sent, for the statuses' sake
 
     # -- bounds and problems ---------------------------------------------------------------
     def bound(self) -> RoundBound:
@@ -127,7 +135,28 @@ class ContinualPlanner:
 
     # -- inputs ---------------------------------------------------------------------------
     def on_request(self, req: SearchRequest) -> list[Message]:
-        """Start, revise (the union of goals) or cancel the search."""
+        """Start, revise (the union of goals) or cancel the search.
+
+        Raise BadRequestError (after the searching state is left as it was) for a problem
+        that does not parse or a goal the domain cannot express.
+        """
+        try:
+            return self._on_request(self._with_problem(req))
+        except (GoalError, PlannerError) as exc:
+            raise BadRequestError(req.request_id, str(exc)) from exc
+
+    def _with_problem(self, req: SearchRequest) -> SearchRequest:
+        """Take a request's own PDDL problem as the beliefs (and goal, if it has none)."""
+        if not req.problem or req.kind == "cancel":
+            return req
+        problem = parse_problem(req.problem, self.domain, f"request {req.request_id}")
+        goal = [list(g) for g in req.goal] or goal_of(problem)
+        beliefs = beliefs_from_problem(problem)
+        problem_from_beliefs(self.domain, beliefs, goal)  # the goal fits the domain
+        self.beliefs = beliefs
+        return replace(req, goal=goal, problem="")
+
+    def _on_request(self, req: SearchRequest) -> list[Message]:
         if req.kind == "cancel":
             self.request, self.search, self.line = None, None, None
             return [self._status(req.request_id, "cancelled")]
@@ -154,7 +183,13 @@ class ContinualPlanner:
         return [self._status(req.request_id, "searching")]
 
     def on_status(self, status: ActionStatus) -> None:
-        """Record a step's status for the commitment and the forecast."""
+        """Record a step's status for the commitment and the forecast.
+
+        Raise UnknownPlanError for a plan this planner never published (statuses of
+        replaced plans are expected and ignored).
+        """
+        if status.plan_id not in self.published:
+            raise UnknownPlanError(status.plan_id, status.step_id)
         for line in (self.line, self.search.repairs if self.search else None):
             if (
                 line is not None
@@ -314,6 +349,7 @@ class ContinualPlanner:
             )
             line.step_ids.append(step_id)
         line.complete = complete
+        self.published.add(line.plan_id)
         baseline = line.baseline if first == 0 else line.plan_id
         return PartialPlan(
             agent=self.agent,

@@ -9,18 +9,26 @@ conjunction of the goal atoms.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import MappingProxyType
 
 from cbdi.beliefs import BeliefSet
 from cbdi_planner.pddl.ast import INST, Atom, Domain, FHead, Lit, Problem
 
-__all__ = ["GoalError", "problem_from_beliefs"]
+__all__ = [
+    "GoalError",
+    "beliefs_from_problem",
+    "check_goal",
+    "goal_of",
+    "problem_from_beliefs",
+]
 
 
 class GoalError(ValueError):
     """A goal atom the domain cannot express (unknown predicate, wrong arity)."""
 
 
-def _check_goal(domain: Domain, goal: Sequence[Sequence[str]]) -> list[Atom]:
+def check_goal(domain: Domain, goal: Sequence[Sequence[str]]) -> list[Atom]:
+    """Return the goal's atoms; raise GoalError for one the domain cannot express."""
     atoms = []
     for g in goal:
         if not g:
@@ -39,7 +47,7 @@ def problem_from_beliefs(
     domain: Domain, beliefs: BeliefSet, goal: Sequence[Sequence[str]], name: str = "beliefs"
 ) -> Problem:
     """Return the problem of reaching `goal` from `beliefs`."""
-    atoms = _check_goal(domain, goal)
+    atoms = check_goal(domain, goal)
     known_types = set(domain.types) | {"object"}
     objects: dict[str, tuple[str, ...]] = {
         n: (t,)
@@ -64,3 +72,30 @@ def problem_from_beliefs(
         init_numeric=numeric,
         goal=tuple(Lit(a, True, INST) for a in atoms),
     )
+
+
+def beliefs_from_problem(problem: Problem) -> BeliefSet:
+    """Return what a PDDL problem says holds at its start, as beliefs.
+
+    Objects become instances of their (first) type, the init facts and function values
+    beliefs; timed initial literals have no belief counterpart and are refused.
+    """
+    if problem.timed_literals:
+        raise GoalError(f"{problem.file}: timed initial literals cannot be beliefs")
+    instances = {name: types[0] if types else "object" for name, types in problem.objects.items()}
+    facts = frozenset((a.predicate, *a.args) for a in problem.init)
+    fluents = {(h.name, *h.args): v for h, v in problem.init_numeric.items()}
+    return BeliefSet(MappingProxyType(instances), facts, MappingProxyType(fluents))
+
+
+def goal_of(problem: Problem) -> list[list[str]]:
+    """Return the problem's goal as ground atoms; only a conjunction of atoms qualifies."""
+    goal = []
+    for cond in problem.goal:
+        if not isinstance(cond, Lit) or not cond.positive or cond.atom.predicate == "=":
+            raise GoalError(
+                f"{problem.file}: the goal must be a conjunction of atoms for the continual"
+                f" planner (found {cond})"
+            )
+        goal.append([cond.atom.predicate, *cond.atom.args])
+    return goal

@@ -24,6 +24,7 @@ from cbdi import keys
 from cbdi.agentfile import RawAgentFile
 from cbdi.beliefs import BeliefSet, from_wire
 from cbdi.bus import inputs, publish
+from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import ActionStatus, BeliefsUpdate, PartialPlan
@@ -31,10 +32,18 @@ from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.backends import plan_with
 from cbdi_planner.agent.continual import ContinualPlanner
-from cbdi_planner.agent.problem import GoalError, problem_from_beliefs
+from cbdi_planner.agent.errors import BadRequestError, UnknownAgentError
+from cbdi_planner.agent.problem import (
+    GoalError,
+    beliefs_from_problem,
+    check_goal,
+    goal_of,
+    problem_from_beliefs,
+)
 from cbdi_planner.agent.steps import plan_steps
 from cbdi_planner.errors import PlannerError
-from cbdi_planner.pddl.ast import Domain
+from cbdi_planner.pddl import parse_problem
+from cbdi_planner.pddl.ast import Domain, Problem
 from cbdi_planner.plan import Plan
 
 __all__ = ["OnlinePlannerService", "PlannerService", "PlannerSettings", "planner_main"]
@@ -81,18 +90,34 @@ class PlannerService:
         return [keys.planner_requests(self.agent), keys.scheduler_beliefs(self.agent)]
 
     async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
-        async for _, msg in stream:
-            if isinstance(msg, BeliefsUpdate) and msg.agent == self.agent:
-                self.beliefs, self.now = from_wire(msg), max(self.now, msg.time)
-                self.has_beliefs = True
-                if self.deferred is not None:
-                    req, self.deferred = self.deferred, None
-                    await self.on_request(req)
-            elif isinstance(msg, SearchRequest) and msg.agent == self.agent:
-                if not self.has_beliefs and msg.kind != "cancel":
-                    self.deferred = msg  # plan from what the agent believes, once it says
-                    continue
-                await self.on_request(msg)
+        async for key, msg in stream:
+            agent = getattr(msg, "agent", None)
+            try:
+                if agent != self.agent:
+                    raise UnknownAgentError(str(agent), self.agent, type(msg).__name__)
+                await self.handle(msg)
+            except CbdiError as exc:
+                self.ctx.bad_input(key, exc)
+            except Exception as exc:
+                self.ctx.crashed(key, exc)
+
+    async def handle(self, msg: Message) -> None:
+        if isinstance(msg, BeliefsUpdate):
+            self.beliefs, self.now = from_wire(msg), max(self.now, msg.time)
+            self.has_beliefs = True
+            if self.deferred is not None:
+                req, self.deferred = self.deferred, None
+                await self.on_request(req)
+        elif isinstance(msg, SearchRequest):
+            if not self.has_beliefs and msg.kind != "cancel" and not msg.problem:
+                try:
+                    checked(self.domain, msg)
+                except BadRequestError as exc:
+                    await self.status(msg.request_id, "failed", exc.reason)
+                    raise
+                self.deferred = msg  # plan from what the agent believes, once it says
+                return
+            await self.on_request(msg)
 
     async def on_request(self, req: SearchRequest) -> None:
         if self.searching is not None:
@@ -104,15 +129,29 @@ class PlannerService:
             return
         if req.kind == "revise" and self.request is not None:
             req = replace(req, request_id=self.request.request_id)
+        try:
+            req, problem = self.problem(req)
+        except (GoalError, PlannerError) as exc:
+            self.request = None
+            await self.status(req.request_id, "failed", str(exc))
+            raise BadRequestError(req.request_id, str(exc)) from exc
         self.request = req
         await self.status(req.request_id, "searching")
-        self.searching = self.ctx.start(self.search(req), name="search")
+        self.searching = self.ctx.start(self.search(req, problem), name="search")
 
-    async def search(self, req: SearchRequest) -> None:
-        """Plan from the latest beliefs; publish the plan and the outcome."""
+    def problem(self, req: SearchRequest) -> tuple[SearchRequest, Problem]:
+        """The request's problem: its own PDDL problem, or the beliefs and its goal."""
+        if req.problem:
+            parsed = parse_problem(req.problem, self.domain, f"request {req.request_id}")
+            goal = [list(g) for g in req.goal] or goal_of(parsed)
+            self.beliefs, self.has_beliefs = beliefs_from_problem(parsed), True
+            req = replace(req, goal=goal, problem="")
+        return req, problem_from_beliefs(self.domain, self.beliefs, req.goal)
+
+    async def search(self, req: SearchRequest, problem: Problem) -> None:
+        """Plan `problem` with the backend; publish the plan and the outcome."""
         seconds = self.raw.planning.timeout
         try:
-            problem = problem_from_beliefs(self.domain, self.beliefs, req.goal)
             plan = await asyncio.to_thread(
                 plan_with, self.backend, self.domain, self.raw.domain, problem, seconds
             )
@@ -166,37 +205,46 @@ class OnlinePlannerService:
     async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
         core = self.core
         async for key, msg in stream:
-            if getattr(msg, "agent", None) != core.agent:
-                continue
+            agent = getattr(msg, "agent", None)
             try:
-                await self.handle(msg)
+                if agent != core.agent:
+                    raise UnknownAgentError(str(agent), core.agent, type(msg).__name__)
+                await self.handle(key, msg)
+            except CbdiError as exc:
+                self.ctx.bad_input(key, exc)
             except Exception as exc:
-                self.ctx.log.error("input_failed", key=key, error=f"{type(exc).__name__}: {exc}")
+                self.ctx.crashed(key, exc)
             if core.search is not None:
                 self.wake.set()
 
-    async def handle(self, msg: Message) -> None:
+    async def handle(self, key: str, msg: Message) -> None:
         core = self.core
         if isinstance(msg, BeliefsUpdate):
             self.has_beliefs = True
             await self.send(core.on_beliefs(from_wire(msg), msg.time))
             if self.deferred is not None:
                 req, self.deferred = self.deferred, None
-                await self.start(req)
+                await self.start(keys.planner_requests(core.agent), req)
         elif isinstance(msg, SearchRequest):
-            if not self.has_beliefs and msg.kind != "cancel":
+            if not self.has_beliefs and msg.kind != "cancel" and not msg.problem:
+                try:
+                    checked(self.core.domain, msg)
+                except BadRequestError as exc:
+                    await self.send([core._status(msg.request_id, "failed", exc.reason)])
+                    raise
                 self.deferred = msg  # plan from what the agent believes, once it says
                 return
-            await self.start(msg)
+            await self.start(key, msg)
+            self.has_beliefs = self.has_beliefs or bool(msg.problem)
         elif isinstance(msg, ActionStatus):
             core.on_status(msg)
 
-    async def start(self, req: SearchRequest) -> None:
+    async def start(self, key: str, req: SearchRequest) -> None:
         try:
             await self.send(self.core.on_request(req))
-        except (GoalError, PlannerError, ValueError) as exc:
-            self.ctx.log.warning("search_failed", request=req.request_id, error=str(exc))
-            await self.send([self.core._status(req.request_id, "failed", str(exc))])
+        except BadRequestError as exc:
+            await self.send([self.core._status(req.request_id, "failed", exc.reason)])
+            raise
 
     async def rounds(self) -> None:
         """Run the search in progress round after round (Alg. 2's loop)."""
@@ -235,6 +283,15 @@ class OnlinePlannerService:
             else:
                 continue
             await publish(self.ctx.bus, key, msg, block=True)
+
+
+def checked(domain: Domain, req: SearchRequest) -> SearchRequest:
+    """Return `req` if its goal fits the domain (checked before it waits for beliefs)."""
+    try:
+        check_goal(domain, req.goal)
+    except GoalError as exc:
+        raise BadRequestError(req.request_id, str(exc)) from exc
+    return req
 
 
 def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -> ServiceMain:
