@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner
 PYTEST_ARGS ?=
 
-.PHONY: venv demo test lint bench clean system-tools
+.PHONY: venv demo test lint bench bench-planner clean system-tools
 
 venv: $(STAMP)
 
@@ -48,6 +48,13 @@ bench: venv
 	$(BIN)/python benchmarks/bus_latency.py
 	$(BIN)/python benchmarks/world_epochs.py
 	$(BIN)/python benchmarks/recorder.py
+
+# cbdi's planner against kairos on the IPC temporal problems (../shared/benchmarks/temporal)
+# and the recycling maps, 60 s per problem; table and summary printed, CSV in
+# benchmarks/results/. Options: make bench-planner BENCH_PLANNER_ARGS="--only driverlog".
+BENCH_PLANNER_ARGS ?=
+bench-planner: venv
+	$(BIN)/python benchmarks/planner.py $(BENCH_PLANNER_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

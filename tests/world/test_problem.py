@@ -18,9 +18,10 @@ MAPS = sorted((ROOT / "domains/recycling/maps").glob("*.toml"))
 BIN = Path(sys.executable).parent
 
 
-def test_the_checked_in_paper_problem_is_what_the_generator_writes() -> None:
-    text = problem_text(load_map(ROOT / "domains/recycling/maps/paper-7x7.toml"))
-    stored = (ROOT / "domains/recycling/problems/paper-7x7.pddl").read_text()
+@pytest.mark.parametrize("name", ["paper-7x7", "warehouse-15x15", "campus-30x30"])
+def test_the_checked_in_problems_are_what_the_generator_writes(name: str) -> None:
+    text = problem_text(load_map(ROOT / f"domains/recycling/maps/{name}.toml"))
+    stored = (ROOT / f"domains/recycling/problems/{name}.pddl").read_text()
     assert text.splitlines()[1:] == stored.splitlines()[1:]  # line 1 names the source
 
 
