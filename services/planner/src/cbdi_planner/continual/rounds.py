@@ -2,16 +2,18 @@
 
 The open and closed lists live in a `SearchSpace` that survives from round to round, so
 no search progress is lost between rounds (Alg. 1, note after line 14). Two strategies:
-`G`, greedy best-first on helpful actions only (fast, incomplete), and `NG`, best-first on
-every successor (complete). `reroot` moves the space's root to a state a round returned
-(Alg. 2 line 19): the closed list is cleared, only open nodes whose plan starts with the
-new root's plan are kept, and plan sizes count from the new root.
+`G`, enforced hill-climbing on helpful actions only (JavaFF's greedy search: fast,
+incomplete), and `NG`, best-first on every successor (complete). `reroot` moves the
+space's root to a state a round returned (Alg. 2 line 19): the closed list is cleared,
+only open nodes whose plan starts with the new root's plan are kept, and plan sizes
+count from the new root.
 """
 
 from __future__ import annotations
 
 import heapq
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -59,7 +61,14 @@ def plan_size(node: Node, root_steps: int) -> int:
 
 
 class SearchSpace:
-    """The open and closed lists of one continual search, rooted at `root`."""
+    """The open and closed lists of one continual search, rooted at `root`.
+
+    In `G` the open list is the breadth-first queue of enforced hill-climbing (JavaFF's
+    greedy search, which CJFF runs first): successors by helpful actions only, and the
+    first one strictly better than the climber (`current`) becomes the climber and
+    empties the queue. In `NG` it is a best-first priority queue on h (ties: shorter
+    plans) over every successor, which is complete.
+    """
 
     def __init__(
         self,
@@ -76,24 +85,44 @@ class SearchSpace:
         self.expander = Expander(task, epsilon)
         self.root = self.expander.root(state)
         self.root_steps = 0  # timeline steps before the root (the prefix cut off)
-        self.open: list[tuple[int, int, int, Node]] = []
+        self.open: list[tuple[int, int, int, Node]] = []  # NG
+        self.queue: deque[Node] = deque()  # G
+        self.current = self.root  # G: the hill-climber's node
         self.closed: set[object] = set()
         self.counter = 0
         self.expanded = 0
         self._push(self.root)
 
     def _push(self, node: Node) -> None:
+        if self.mode == G:
+            self.queue.append(node)
+            return
         self.counter += 1
         heapq.heappush(self.open, (node.h, len(node.timeline.steps), self.counter, node))
+
+    def _pop(self) -> Node:
+        return self.queue.popleft() if self.mode == G else heapq.heappop(self.open)[3]
+
+    def _unpop(self, node: Node) -> None:
+        if self.mode == G:
+            self.queue.appendleft(node)
+        else:
+            self._push(node)
+
+    def _has_open(self) -> bool:
+        return bool(self.queue) if self.mode == G else bool(self.open)
+
+    def _clear_open(self) -> None:
+        self.open, self.queue = [], deque()
 
     def search_round(self, bound: RoundBound) -> Round:
         """Run Algorithm 1 from the root until the goal, a bound, or an empty open list."""
         started, expanded = self.now(), 0
         best = self.root  # line 1
         if self.expander.dead(best):
-            self.open.clear()
-        while self.open:  # line 4
-            node = heapq.heappop(self.open)[3]  # line 5
+            self._clear_open()
+        while self._has_open():  # line 4
+            node = self._pop()  # line 5
             key = node.state.key()
             if key in self.closed:
                 continue
@@ -105,7 +134,7 @@ class SearchSpace:
             if self._bound_hit(bound, best, expanded, started):  # lines 9-11
                 # `node` is not expanded yet: it stays open for the next round.
                 self.closed.discard(key)
-                self._push(node)
+                self._unpop(node)
                 return self._done("best", best, expanded, started)
             expanded += 1
             self._expand(node)  # lines 12-14
@@ -123,13 +152,20 @@ class SearchSpace:
 
     def _expand(self, node: Node) -> None:
         """searchCoreLogic: G keeps helpful successors only, NG every successor."""
-        helpful_only = self.mode == G
-        for state, timeline, running in self.expander.successors(node, helpful_only):
+        greedy = self.mode == G
+        for state, timeline, running in self.expander.successors(node, greedy):
             if state.key() in self.closed:  # needToVisit
                 continue
             child = self.expander.evaluate(state, timeline, running)
-            if not self.expander.dead(child):
-                self._push(child)
+            if self.expander.dead(child):
+                continue
+            if greedy and child.h < self.current.h:
+                # Enforced hill-climbing: climb to the better node, forget the plateau.
+                self.current = child
+                self.queue.clear()
+                self.queue.append(child)
+                break
+            self._push(child)
         self.expanded += 1
 
     def _done(self, kind: str, node: Node | None, expanded: int, started: float) -> Round:
@@ -141,22 +177,28 @@ class SearchSpace:
         if node.running:
             raise ValueError("cannot re-root on a state with running actions")
         prefix = node.timeline.steps
-        kept = [
-            entry
-            for entry in self.open
-            if len(entry[3].timeline.steps) > len(prefix)
-            and all(a is b for a, b in zip(entry[3].timeline.steps, prefix, strict=False))
-        ]
-        heapq.heapify(kept)
-        self.open, self.closed = kept, set()
+
+        def extends(n: Node) -> bool:
+            steps = n.timeline.steps
+            return len(steps) > len(prefix) and all(
+                a is b for a, b in zip(steps, prefix, strict=False)
+            )
+
+        self.open = [entry for entry in self.open if extends(entry[3])]
+        heapq.heapify(self.open)
+        self.queue = deque(n for n in self.queue if extends(n))
+        if not extends(self.current):
+            self.current, self.queue = node, deque()
+        self.closed = set()
         self.root, self.root_steps = node, len(prefix)
         self._push(node)
 
     def restart(self, mode: str, root: Node) -> None:
         """Search again in `mode` from `root` (a node of this space) with empty lists."""
-        self.mode, self.root = mode, root
+        self.mode, self.root, self.current = mode, root, root
         self.root_steps = len(root.timeline.steps)
-        self.open, self.closed = [], set()
+        self._clear_open()
+        self.closed = set()
         self._push(root)
 
     def new_steps(self, node: Node) -> range:
