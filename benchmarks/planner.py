@@ -37,6 +37,7 @@ from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from cbdi_planner.errors import PlanInvalid
 from cbdi_planner.plan import Plan, parse_plan
@@ -102,6 +103,11 @@ class Problem:
         """Return `suite/domain/problem`, the name `--only` matches."""
         return f"{self.suite}/{self.domain}/{self.name}"
 
+    @property
+    def files(self) -> list[str]:
+        """Return the domain and problem files, as a planner's arguments."""
+        return [str(self.domain_file), str(self.problem_file)]
+
 
 @dataclass(frozen=True)
 class Found:
@@ -143,18 +149,14 @@ class Result:
 # ---------------------------------------------------------------- pure: reading outputs
 
 
-def cbdi_found(report: dict[str, object]) -> tuple[Found, ...]:
+def cbdi_found(report: dict[str, Any]) -> tuple[Found, ...]:
     """Read the improvements of `cbdi plan --json`; their clock starts after parse+ground."""
-    seconds = report.get("seconds")
-    prep = (
-        sum(float(seconds.get(k, 0.0)) for k in ("parse", "ground"))
-        if isinstance(seconds, dict)
-        else 0.0
+    seconds = report.get("seconds", {})
+    prep = float(seconds.get("parse", 0.0)) + float(seconds.get("ground", 0.0))
+    return tuple(
+        Found(prep + float(i["seconds"]), float(i["makespan"]))
+        for i in report.get("improvements", [])
     )
-    improvements = report.get("improvements")
-    if not isinstance(improvements, list):
-        return ()
-    return tuple(Found(prep + float(i["seconds"]), float(i["makespan"])) for i in improvements)
 
 
 def kairos_times(log: str) -> list[float]:
@@ -248,14 +250,13 @@ def row(result: Result, quality: float) -> dict[str, str]:
 def table(rows: Sequence[dict[str, str]]) -> str:
     """Format the rows as an aligned text table."""
     shown = [c for c in COLUMNS if c not in ("suite", "domain", "valid")]
-    head = ["problem" if c == "problem" else c for c in shown]
     lines = [
         [f"{r['domain']}/{r['problem']}" if c == "problem" else r[c] for c in shown] for r in rows
     ]
-    widths = [max(len(x) for x in col) for col in zip(head, *lines, strict=True)]
+    widths = [max(len(x) for x in col) for col in zip(shown, *lines, strict=True)]
     return "\n".join(
         "  ".join(x.ljust(w) for x, w in zip(cells, widths, strict=True)).rstrip()
-        for cells in [head, *lines]
+        for cells in [shown, *lines]
     )
 
 
@@ -347,20 +348,8 @@ def _text(data: str | bytes | None) -> str:
 def run_cbdi(problem: Problem, timeout: float, plan_file: Path) -> Outcome:
     """Plan with cbdi in anytime mode; its plan file holds its best plan."""
     plan_file.unlink(missing_ok=True)
-    command = [
-        str(BIN / "cbdi"),
-        "plan",
-        str(problem.domain_file),
-        str(problem.problem_file),
-        "--timeout",
-        f"{timeout:g}",
-        "--anytime",
-        "--json",
-        "--epsilon",
-        f"{EPSILON:g}",
-        "-o",
-        str(plan_file),
-    ]
+    flags = f"--timeout {timeout:g} --anytime --json --epsilon {EPSILON:g} -o".split()
+    command = [str(BIN / "cbdi"), "plan", *problem.files, *flags, str(plan_file)]
     code, out, err, wall = execute(command, timeout + GRACE)
     try:
         report = json.loads(out)
@@ -376,22 +365,9 @@ def run_kairos(problem: Problem, timeout: float, plan_file: Path) -> Outcome:
     """Plan with kairos in anytime mode; its plans are PLAN.1, PLAN.2, ... (best last)."""
     for old in plan_file.parent.glob(plan_file.name + ".*"):
         old.unlink()
-    command = [
-        str(BIN / "kairos"),
-        "solve",
-        str(problem.domain_file),
-        str(problem.problem_file),
-        "--timeout",
-        f"{timeout:g}",
-        "--anytime",
-        "--threads",
-        str(KAIROS_THREADS),
-        "--epsilon",
-        f"{EPSILON:g}",
-        "--output",
-        str(plan_file),
-        "-v",
-    ]
+    flags = f"--timeout {timeout:g} --anytime --threads {KAIROS_THREADS} --epsilon {EPSILON:g}"
+    command = [str(BIN / "kairos"), "solve", *problem.files, *flags.split()]
+    command += ["--output", str(plan_file), "-v"]
     code, _, err, wall = execute(command, timeout + GRACE)
     files = sorted(plan_file.parent.glob(plan_file.name + ".*"), key=lambda p: int(p.suffix[1:]))
     times = kairos_times(err) + [wall] * len(files)  # a killed run may miss log lines
@@ -409,15 +385,8 @@ def judge(problem: Problem, planner: str, outcome: Outcome) -> Result:
     """Validate the best plan of a run with `kairos validate`."""
     if outcome.plan_file is None:
         return Result(problem, planner, outcome, False, None, None)
-    command = [
-        str(BIN / "kairos"),
-        "validate",
-        str(problem.domain_file),
-        str(problem.problem_file),
-        str(outcome.plan_file),
-        "--epsilon",
-        f"{EPSILON:g}",
-    ]
+    command = [str(BIN / "kairos"), "validate", *problem.files, str(outcome.plan_file)]
+    command += ["--epsilon", f"{EPSILON:g}"]
     code, out, err, _ = execute(command, 120.0)
     makespan = validated_makespan(out + err) if code == 0 else None
     try:
