@@ -34,7 +34,7 @@ class PlanningSettings:
     """How the agent's planner searches (the continual planner's parameters)."""
 
     mode: str = "online"
-    round_interval: float = 0.5
+    round_interval: float = 0.1
     expansions_per_round: int = 200
     plan_size_limit: int = 8
     min_commit_steps: int = 1
