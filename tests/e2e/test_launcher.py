@@ -37,6 +37,8 @@ def test_corridor_run_ends_done_with_json_summary() -> None:
     robot = summary["stats"]["agents"]["robot1"]
     assert (robot["moves"], robot["pickups"], robot["recycled"]) == (6, 1, 1)
     assert summary["restarts"] == {"router": 0, "world": 0, "robot1/executor": 0}
+    assert summary["planner"]["agents"] == {}  # a scripted robot has no planner
+    assert summary["planner"]["total"]["replans"] == 0
 
 
 def test_several_agents_share_one_world() -> None:
@@ -61,6 +63,13 @@ def test_bdi_agent_recycles_everything_in_the_paper_scenario() -> None:
     assert robot["moves"] >= 22  # the paper: 22 moves is the shortest tour
     assert set(summary["restarts"]) >= {"robot1/planner", "robot1/scheduler", "robot1/executor"}
     assert not any(summary["restarts"].values())
+    planner = summary["planner"]["agents"]["robot1"]  # counted live from the planner's keys
+    for name in ("plans", "replans", "forecast_repairs", "improvements", "search_rounds"):
+        assert isinstance(planner[name], int) and planner[name] >= 0, name
+        assert summary["planner"]["total"][name] == planner[name]
+    assert planner["search_rounds"] > 0 and planner["plans"] >= 1
+    assert planner["replans"] == sum(planner["replans_by"].values())
+    assert planner["forecast_repairs"] == planner["replans_by"]["repair"]
 
 
 def test_time_limited_run_and_seconds_until() -> None:

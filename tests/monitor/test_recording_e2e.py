@@ -95,6 +95,7 @@ def test_inspect_reports_the_worlds_moves(recording: tuple[Path, dict, str]) -> 
     assert robot["moves"] == summary["stats"]["agents"]["robot1"]["moves"] == 22
     assert robot["recycled"] == 3 and report["result"] == "done"
     assert robot["first_action_time"] == 0.0
+    assert robot["replans"] is None and robot["search_rounds"] is None  # no planner
     text = run("cbdi", "inspect", str(path)).stdout
     assert "agent robot1: moves=22" in text
 

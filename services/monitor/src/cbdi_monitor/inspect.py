@@ -2,8 +2,11 @@
 
 Channels with message counts, the duration, and per agent: moves, actions by kind and
 outcome, failed and rejected actions, the simulated time of its first action, litter
-recycled, plans executed, early arrests, goals achieved and desires dropped. Replans and
-forecast-triggered repairs stay `null` until the planner service (issue 4) reports them.
+recycled, partial plans passed to the executor (`plans`), early arrests, goals achieved
+and desires dropped; and from its planner's messages (counted by `cbdi.tally`, as `cbdi
+up` counts them live): plans published, replans (by purpose), forecast-triggered repairs,
+improvements, search rounds and the nodes they expanded, forecasts by kind. The planner
+counts are `null` for an agent whose planner said nothing (a scripted robot).
 """
 
 from __future__ import annotations
@@ -16,8 +19,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from cbdi.errors import CbdiError, WireError
+from cbdi.tally import MESSAGES, SCHEMAS, PlannerTally
 from cbdi.wire.agent import ArrestReport, DesireEvent, PartialPlan
-from cbdi.wire.base import decode
+from cbdi.wire.base import decode, decode_any
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import ActionOutcome, ActionRequest, Tick, WorldStats
 from cbdi_monitor.reader import RecordedMessage, read_messages
@@ -42,8 +46,14 @@ class AgentReport:
     arrests: int = 0
     goals_achieved: int = 0
     desires_dropped: int = 0
+    plans_published: int | None = None
     replans: int | None = None
+    replans_by: dict[str, int] | None = None
     forecast_repairs: int | None = None
+    improvements: int | None = None
+    search_rounds: int | None = None
+    search_expanded: int | None = None
+    forecasts: dict[str, int] | None = None
 
 
 @dataclass
@@ -64,6 +74,7 @@ class Inspection:
 def inspect_messages(messages: Iterable[RecordedMessage]) -> Inspection:
     """Summarise recorded messages (pure: no files, no bus)."""
     report = Inspection()
+    tally = PlannerTally()
     counts: Counter[str] = Counter()
     first_ns = last_ns = 0
     now = 0.0
@@ -72,9 +83,13 @@ def inspect_messages(messages: Iterable[RecordedMessage]) -> Inspection:
         first_ns = first_ns or m.log_ns
         last_ns = max(last_ns, m.log_ns)
         try:
+            if m.schema in SCHEMAS:
+                tally.observe(m.key, decode_any(m.payload, MESSAGES, m.key))
             now = _account(report, m, now)
         except WireError:
             report.undecodable += 1
+    for name in tally.agents:
+        _planner(_agent(report, name), tally, name)
     report.messages = sum(counts.values())
     report.channels = dict(sorted(counts.items()))
     report.duration_s = round((last_ns - first_ns) / 1e9, 3)
@@ -122,6 +137,14 @@ def _agent_message(report: Inspection, m: RecordedMessage) -> None:
             _agent(report, event.agent).desires_dropped += 1
 
 
+def _planner(agent: AgentReport, tally: PlannerTally, name: str) -> None:
+    c = tally.counts(name)
+    agent.plans_published, agent.replans, agent.replans_by = c.plans, c.replans, c.replans_by
+    agent.forecast_repairs, agent.improvements = c.forecast_repairs, c.improvements
+    agent.search_rounds, agent.search_expanded = c.search_rounds, c.expanded
+    agent.forecasts = c.forecasts
+
+
 def _outcome(agent: AgentReport, o: ActionOutcome) -> None:
     key = f"{o.action}:{o.status}"
     agent.actions[key] = agent.actions.get(key, 0) + 1
@@ -153,7 +176,20 @@ def render(report: Inspection) -> str:
             f"requests={a.requests} first action at {first}"
         )
         lines.append("    " + " ".join(f"{k}={v}" for k, v in sorted(a.actions.items())))
+        if a.replans is not None:
+            lines.append("    " + _render_planner(a))
     return "\n".join(lines)
+
+
+def _render_planner(a: AgentReport) -> str:
+    by = " ".join(f"{k}={v}" for k, v in (a.replans_by or {}).items() if v)
+    seen = " ".join(f"{k}={v}" for k, v in (a.forecasts or {}).items())
+    return (
+        f"planner: plans={a.plans_published} replans={a.replans}"
+        + (f" ({by})" if by else "")
+        + f" forecast_repairs={a.forecast_repairs} improvements={a.improvements}"
+        f" search_rounds={a.search_rounds} expanded={a.search_expanded} forecasts: {seen}"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

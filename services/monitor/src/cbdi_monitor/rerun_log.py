@@ -4,22 +4,34 @@ Entity layout (what a user sees in the viewer):
 
 - `world/map/walls`, `world/map/bins` (static boxes), `world/people`, `world/litter`
 - `world/robots` (points labelled with names), `agents/<name>/intent` (the requested move)
-- `agents/<name>/log` (text log: requests, outcomes, desires, plans, step statuses, early
-  arrests), `world/plans/<name>` (the cells each received plan's moves visit),
-  `health` (services up/down)
+- `agents/<name>/log` (text log: requests, outcomes, desires, search requests, plans and
+  replans with their purpose, failure forecasts, search fall-backs, step statuses, early
+  arrests), `health` (services up/down)
+- `world/plans/<name>/committed` and `world/plans/<name>/rest`: the cells the current
+  plan's moves still visit, from the robot; the committed part (steps running or done,
+  up to the last committed step of the latest forecast, and what a replacing plan takes
+  over from the old one up to its `applies_after`) thick, the rest, which a repair may
+  still change, thin and pale
 - `plots/<name>/{moves,recycled,failed,blocked}` (from the world's statistics)
+- `plots/<name>/planner/{expanded,best_h,round_seconds,search_rounds}` per search round,
+  `plots/<name>/planner/{replans,forecast_repairs,plan_steps}` per published plan,
+  `plots/<name>/forecasts/<kind>` (forecasts so far, per kind; counted by `cbdi.tally`)
 
 Timelines: `epoch` (sequence) and `sim_time` (simulated seconds).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
+from cbdi import keys
 from cbdi.errors import WireError
-from cbdi.wire.agent import ActionStatus, ArrestReport, DesireEvent, PartialPlan
+from cbdi.tally import PlannerTally
+from cbdi.wire.agent import ActionStatus, ArrestReport, DesireEvent, PartialPlan, PlanStep
 from cbdi.wire.base import decode
 from cbdi.wire.common import Liveliness, RunFinished
+from cbdi.wire.planner import FORECAST_KINDS, ForecastReport, SearchRequest, SearchRound
 from cbdi.wire.world import (
     ActionOutcome,
     ActionRequest,
@@ -42,6 +54,53 @@ ROBOT_COLOURS = [
     (220, 90, 160),
     (120, 120, 120),
 ]
+ENDED = ("succeeded", "failed", "refused", "cancelled")
+
+
+@dataclass
+class Route:
+    """The plan an agent follows, as far as the map shows it: its steps in order (a
+    replacing plan's own after the old plan's steps it takes over), those that ended, and
+    the index of the last committed one (-1: none)."""
+
+    plan_id: str = ""
+    steps: list[PlanStep] = field(default_factory=list)
+    ended: set[str] = field(default_factory=set)
+    committed: int = -1
+    retired: set[str] = field(default_factory=set)
+
+    def take(self, plan: PartialPlan) -> bool:
+        """Add `plan`'s steps: more of this plan, or a plan replacing it; False: stale."""
+        if plan.plan_id in self.retired:
+            return False  # passed on late, after the plan that replaced it
+        if plan.plan_id == self.plan_id:
+            known = {s.step_id for s in self.steps}
+            self.steps += [s for s in plan.steps if s.step_id not in known]
+            return True
+        ids = [s.step_id for s in self.steps]
+        kept = ids.index(plan.applies_after) + 1 if plan.applies_after in ids else 0
+        if self.plan_id:
+            self.retired.add(self.plan_id)
+        self.plan_id, self.steps = plan.plan_id, self.steps[:kept] + list(plan.steps)
+        self.committed = kept - 1  # what the old plan still does is committed
+        return True
+
+    def commit_through(self, step_id: str) -> None:
+        ids = [s.step_id for s in self.steps]
+        if step_id in ids:
+            self.committed = max(self.committed, ids.index(step_id))
+
+    def cells(self) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+        """Return the cells the remaining moves visit: committed ones, then the rest."""
+        committed: list[tuple[int, int]] = []
+        rest: list[tuple[int, int]] = []
+        for i, s in enumerate(self.steps):
+            if s.step_id in self.ended or s.action != "move" or len(s.args) < 3:
+                continue
+            cell = _cell(s.args[2])
+            if cell[0] >= 0:
+                (committed if i <= self.committed else rest).append(cell)
+        return committed, rest
 
 
 class RerunLogger:
@@ -53,6 +112,9 @@ class RerunLogger:
         self.colours: dict[str, tuple[int, int, int]] = {}
         self.cells: dict[str, tuple[int, int]] = {}
         self.skipped = 0
+        self.tally = PlannerTally()
+        self.routes: dict[str, Route] = {}
+        self.modes: dict[str, str] = {}  # plan id -> search mode of its last round
 
     def colour(self, agent: str) -> tuple[int, int, int]:
         if agent not in self.colours:
@@ -197,24 +259,104 @@ class RerunLogger:
         )
 
     def on_plan(self, m: RecordedMessage) -> None:
-        """Draw the cells a plan's moves visit, from the robot's cell."""
+        """Log a plan the planner published (a decision) or the scheduler passed on, and
+        draw the route it adds to or replaces."""
         rr, plan = self.rr, decode(m.payload, PartialPlan, m.key)
-        cells = [_cell(s.args[2]) for s in plan.steps if s.action == "move" and len(s.args) > 2]
-        path = [(x + 0.5, y + 0.5) for x, y in cells if x >= 0]
-        here = self.cells.get(plan.agent)
-        if here is not None:
-            path.insert(0, (here[0] + 0.5, here[1] + 0.5))
-        self.log(
-            f"agents/{plan.agent}/log",
-            rr.TextLog(
-                f"plan {plan.plan_id} (after {plan.baseline or 'nothing'}): {len(plan.steps)} steps"
-            ),
-        )
-        if len(path) > 1:
+        if m.key == keys.planner_plans(plan.agent):
+            self._planned(m.key, plan)
+        else:
             self.log(
-                f"world/plans/{plan.agent}",
-                rr.LineStrips2D([path], colors=[self.colour(plan.agent)], radii=0.06),
+                f"agents/{plan.agent}/log",
+                rr.TextLog(
+                    f"plan {plan.plan_id} (after {plan.baseline or 'nothing'}):"
+                    f" {len(plan.steps)} steps"
+                ),
             )
+        if self.routes.setdefault(plan.agent, Route()).take(plan):
+            self._draw(plan.agent)
+
+    def _planned(self, key: str, plan: PartialPlan) -> None:
+        rr, a = self.rr, plan.agent
+        line = self.tally.observe(key, plan)
+        end = " (complete)" if plan.complete else ""
+        if line is None:
+            text, level = f"planner: {plan.plan_id} +{len(plan.steps)} steps{end}", "DEBUG"
+        else:
+            what = f"replan #{self.tally.counts(a).replans}" if line.replan else "plan"
+            after = f", after {line.applies_after}" if line.applies_after else ""
+            text = f"planner: {what} {plan.plan_id} ({line.kind}{after}): "
+            text += f"{len(plan.steps)} steps{end}"
+            level = "WARN" if line.kind == "repair" else "INFO"
+        self.log(f"agents/{a}/log", rr.TextLog(text, level=level))
+        counts, published = self.tally.counts(a), self.tally.line(a, plan.plan_id)
+        self.log(f"plots/{a}/planner/replans", rr.Scalars(counts.replans))
+        self.log(f"plots/{a}/planner/forecast_repairs", rr.Scalars(counts.forecast_repairs))
+        if published is not None:
+            self.log(f"plots/{a}/planner/plan_steps", rr.Scalars(published.steps))
+
+    def _draw(self, agent: str) -> None:
+        """Draw the route's committed part thick, the rest (still repairable) thin, pale."""
+        rr, route = self.rr, self.routes[agent]
+        committed, rest = route.cells()
+        here = self.cells.get(agent)
+        start = [(here[0] + 0.5, here[1] + 0.5)] if here is not None else []
+        firm = start + [(x + 0.5, y + 0.5) for x, y in committed]
+        loose = firm[-1:] + [(x + 0.5, y + 0.5) for x, y in rest]
+        colour = self.colour(agent)
+        pale = tuple((c + 2 * 255) // 3 for c in colour)
+        for part, points, radius, rgb in (
+            ("committed", firm, 0.09, colour),
+            ("rest", loose, 0.04, pale),
+        ):
+            path = f"world/plans/{agent}/{part}"
+            if len(points) > 1:
+                self.log(path, rr.LineStrips2D([points], colors=[rgb], radii=radius))
+            else:
+                self.log(path, rr.Clear(recursive=False))
+
+    def on_search(self, m: RecordedMessage) -> None:
+        rr, req = self.rr, decode(m.payload, SearchRequest, m.key)
+        self.tally.observe(m.key, req)
+        goal = " ".join(f"({' '.join(g)})" for g in req.goal)
+        what = f" for {req.desire}: {goal}" if goal else ""
+        text = f"search {req.kind} {req.request_id}{what}"
+        self.log(f"agents/{req.agent}/log", rr.TextLog(text, level="DEBUG"))
+
+    def on_round(self, m: RecordedMessage) -> None:
+        rr, r = self.rr, decode(m.payload, SearchRound, m.key)
+        self.tally.observe(m.key, r)
+        plots = f"plots/{r.agent}/planner"
+        self.log(f"{plots}/expanded", rr.Scalars(r.expanded))
+        self.log(f"{plots}/round_seconds", rr.Scalars(r.seconds))
+        self.log(f"{plots}/search_rounds", rr.Scalars(self.tally.counts(r.agent).search_rounds))
+        if r.best_h >= 0:
+            self.log(f"{plots}/best_h", rr.Scalars(r.best_h))
+        before, self.modes[r.plan_id] = self.modes.get(r.plan_id, r.mode), r.mode
+        search = f"planner: {r.purpose} search for {r.plan_id}"
+        if r.mode != before:
+            text = f"{search} falls back from {before} to {r.mode} (round {r.number})"
+            self.log(f"agents/{r.agent}/log", rr.TextLog(text, level="WARN"))
+        if r.kind == "exhausted":
+            text = f"{search}: round {r.number} exhausted the space in mode {r.mode}"
+            self.log(f"agents/{r.agent}/log", rr.TextLog(text, level="WARN"))
+
+    def on_forecast(self, m: RecordedMessage) -> None:
+        rr, f = self.rr, decode(m.payload, ForecastReport, m.key)
+        self.tally.observe(m.key, f)
+        seen = self.tally.counts(f.agent).forecasts
+        for kind in FORECAST_KINDS:
+            self.log(f"plots/{f.agent}/forecasts/{kind}", rr.Scalars(seen.get(kind, 0)))
+        through = f"committed through {f.committed or 'nothing'}"
+        if f.kind == "holds":
+            text, level = f"forecast: {f.plan_id} holds ({through})", "DEBUG"
+        else:
+            at = f" at {f.failed_step}" if f.failed_step else ""
+            text, level = f"forecast: {f.plan_id} {f.kind}{at} ({through}): {f.reason}", "WARN"
+        self.log(f"agents/{f.agent}/log", rr.TextLog(text, level=level))
+        route = self.routes.get(f.agent)
+        if route is not None and route.plan_id == f.plan_id and f.committed:
+            route.commit_through(f.committed)
+            self._draw(f.agent)
 
     def on_status(self, m: RecordedMessage) -> None:
         rr, st = self.rr, decode(m.payload, ActionStatus, m.key)
@@ -226,6 +368,12 @@ class RerunLogger:
             f"agents/{st.agent}/log",
             rr.TextLog(f"step {st.step_id} {st.action} {st.status}{why}", level=level),
         )
+        route = self.routes.get(st.agent)
+        if route is not None and any(s.step_id == st.step_id for s in route.steps):
+            if st.status in ENDED:
+                route.ended.add(st.step_id)
+            route.commit_through(st.step_id)  # a step that started is committed
+            self._draw(st.agent)
 
     def on_arrest(self, m: RecordedMessage) -> None:
         rr, a = self.rr, decode(m.payload, ArrestReport, m.key)
@@ -251,6 +399,9 @@ class RerunLogger:
         "cbdi.agent.PartialPlan/1": on_plan,
         "cbdi.agent.ActionStatus/1": on_status,
         "cbdi.agent.ArrestReport/1": on_arrest,
+        "cbdi.planner.SearchRequest/1": on_search,
+        "cbdi.planner.SearchRound/1": on_round,
+        "cbdi.planner.ForecastReport/1": on_forecast,
     }
 
 

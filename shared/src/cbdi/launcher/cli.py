@@ -19,6 +19,7 @@ from cbdi.launcher.scenario import Scenario, find_scenario, load_scenario
 __all__ = ["main"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+PLANNER_COUNTS = ("plans", "replans", "forecast_repairs", "improvements", "search_rounds")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -145,3 +146,8 @@ def _report(summary: RunSummary, as_json: bool) -> None:
     for name, counts in summary.stats.get("agents", {}).items():
         text = " ".join(f"{k}={v}" for k, v in counts.items())
         print(f"  {name}: {text}", file=sys.stderr)
+    planners = summary.planner.get("agents", {})
+    rows = [*planners.items(), ("total", summary.planner.get("total", {}))] if planners else []
+    for name, counts in rows:
+        text = " ".join(f"{k}={counts[k]}" for k in PLANNER_COUNTS)
+        print(f"  {name} planner: {text}", file=sys.stderr)

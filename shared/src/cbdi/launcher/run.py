@@ -4,6 +4,9 @@ Order: the router; the world; every agent's services. Each start waits until the
 service's liveliness token appears (so it is ready), then the run goes on until the world
 announces `RunFinished`, a service fails beyond its restart policy, the wall-clock limit
 passes, or the user presses Ctrl-C. Everything is stopped in reverse order.
+
+Meanwhile it listens to every planner (`cbdi.tally`): the summary's `planner` holds each
+BDI agent's plans, replans, forecast-triggered repairs and search rounds, and the total.
 """
 
 from __future__ import annotations
@@ -14,12 +17,12 @@ import signal
 import socket
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from cbdi import keys
-from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
+from cbdi import keys, tally
+from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, request
 from cbdi.bus.base import Bus
 from cbdi.errors import CbdiError
 from cbdi.launcher.process import (
@@ -30,6 +33,7 @@ from cbdi.launcher.process import (
     console_script,
 )
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
+from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import StatsRequest, WorldStats
 
@@ -62,6 +66,7 @@ class RunSummary:
     stats: dict[str, Any] = field(default_factory=dict)
     restarts: dict[str, int] = field(default_factory=dict)
     exit_codes: dict[str, list[int]] = field(default_factory=dict)
+    planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
 
     @property
     def ok(self) -> bool:
@@ -167,11 +172,13 @@ async def launch(
     endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
     specs = _specs(scenario, endpoint, opts.record)
     procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
+    planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
+    planners = tally.PlannerTally(planning)
     started = time.monotonic()
     bus: Bus | None = None
     try:
         async with asyncio.TaskGroup() as tg:
-            bus = await _start_all(procs, endpoint, opts, tg, summary)
+            bus = await _start_all(procs, endpoint, opts, tg, summary, planners)
             await _await_end(bus, procs, scenario, opts, tg, summary, say)
             raise _Done
     except* _Done:
@@ -187,6 +194,7 @@ async def launch(
         if bus is not None:
             await bus.close()
     summary.wall_time = round(time.monotonic() - started, 3)
+    summary.planner = planners.summary()
     for proc in procs:
         summary.restarts[proc.spec.service] = proc.restarts
         summary.exit_codes[proc.spec.service] = proc.exit_codes
@@ -203,6 +211,7 @@ async def _start_all(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
+    planners: tally.PlannerTally,
 ) -> Bus:
     summary.result = "starting"
     router, rest = procs[0], procs[1:]
@@ -211,6 +220,8 @@ async def _start_all(
     bus = await open_bus(BusConfig(connect=(endpoint,), connect_timeout=opts.startup_timeout))
     live = _Liveliness()
     tg.create_task(live.follow(bus))
+    # Subscribed before any agent starts, so the tally misses none of their messages.
+    tg.create_task(_count(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
     await _wait_alive(live, [router], opts)
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1
@@ -221,6 +232,12 @@ async def _start_all(
         await _wait_alive(live, group, opts)
     summary.result = "running"
     return bus
+
+
+async def _count(stream: AsyncIterator[tuple[str, Message]], planners: tally.PlannerTally) -> None:
+    """Count the planners' plans, replans, repairs and rounds as they are published."""
+    async for key, msg in stream:
+        planners.observe(key, msg)
 
 
 async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: LaunchOptions) -> None:
