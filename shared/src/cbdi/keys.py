@@ -41,6 +41,8 @@ __all__ = [
     "planner_status",
     "scheduler_arrest",
     "scheduler_beliefs",
+    "scheduler_claims",
+    "scheduler_claims_all",
     "scheduler_desires",
     "scheduler_plans",
     "service_id",
@@ -159,6 +161,16 @@ def planner_forecasts(agent: str) -> str:
 def scheduler_desires(agent: str) -> str:
     """Return the key on which the scheduler reports desire events (activated, dropped)."""
     return agent_stream(agent, "scheduler", "desires")
+
+
+def scheduler_claims(agent: str) -> str:
+    """Return the key on which the scheduler announces its claims to its group."""
+    return agent_stream(agent, "scheduler", "claims")
+
+
+def scheduler_claims_all() -> str:
+    """Return the key expression matching every agent's claims."""
+    return agent_stream("*", "scheduler", "claims")
 
 
 def executor_status(agent: str) -> str:

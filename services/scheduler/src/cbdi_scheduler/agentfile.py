@@ -45,6 +45,7 @@ class AgentFile:
     preemption: str = "clean_preempt"
     plan_retries: int = 3
     exec_retries: int = 3
+    claim: tuple[str, ...] = ()  # goal predicates whose first argument the group shares out
     beliefs: tuple[Belief, ...] = ()
     desires: tuple[Desire, ...] = ()
     rules: tuple[ReactiveRule, ...] = ()
@@ -76,6 +77,10 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         preemption=preemption,
         plan_retries=r.opt(bdi, "plan_retries", int, 3, "scheduler"),
         exec_retries=r.opt(bdi, "exec_retries", int, 3, "scheduler"),
+        claim=tuple(
+            r.check(p, str, f"scheduler.claim[{i}]")
+            for i, p in enumerate(r.opt(bdi, "claim", list, [], "scheduler"))
+        ),
         beliefs=tuple(
             r.belief(b, f"beliefs[{i}]") for i, b in enumerate(r.opt(data, "beliefs", list, []))
         ),

@@ -90,8 +90,12 @@ class IntentionScheduler:
         assert cur is not None
         if desire.goal == cur.desire.goal:
             return []
-        cur.desire = desire  # a BOOSTed goal: the planner revises its search
-        return [Command("start_search", desire, reason="goal revised")]
+        grown = set(cur.desire.goal) <= set(desire.goal)
+        cur.desire = desire
+        if grown:  # a BOOSTed goal: the planner revises its search (the union)
+            return [Command("start_search", desire, reason="goal revised")]
+        # Part of the goal was given up (claimed by another agent): search anew.
+        return [Command("start_search", desire, reason="goal reduced")]
 
     def _start(self, desire: Desire) -> list[Command]:
         self.retry_reason = ""

@@ -8,12 +8,13 @@ Plans, search failures, step statuses and arrest reports go to the intention sch
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.agent import ActionStatus, ArrestReport, DesireEvent, PartialPlan
+from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
 from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
+from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
 from cbdi_scheduler.events import revise_from_outcome, revise_from_percepts
 from cbdi_scheduler.intentions import Command, IntentionScheduler
@@ -29,6 +30,7 @@ class Reaction:
     commands: list[Command] = field(default_factory=list)
     events: list[DesireEvent] = field(default_factory=list)
     beliefs_changed: bool = False
+    claims: list[Claim] = field(default_factory=list)  # to tell the group
 
 
 class Mind:
@@ -43,6 +45,7 @@ class Mind:
         self.now = 0.0
         self.epoch = -1
         self.refire = False  # fire the rules next cycle even if nothing changed
+        self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -65,6 +68,7 @@ class Mind:
             # desire (litter still lying there) may well make it again.
             self.refire = False
             self._fire(out)
+        self._coordinate(out)
         self._deliberate(out)
         if out.beliefs_changed:
             out.commands += self.intentions.retry()
@@ -72,10 +76,26 @@ class Mind:
 
     def _fire(self, out: Reaction) -> None:
         fired = fire_rules(self.spec.rules, self.beliefs, self.desires, self.now)
-        added = [d for n, d in fired.desires.items() if n not in self.desires]
-        self.beliefs, self.desires = fired.beliefs, fired.desires
+        desires = self._unclaimed(fired.desires)
+        added = [d for n, d in desires.items() if n not in self.desires]
+        boosted = [n for n in fired.boosted if n in desires and desires[n] != self.desires.get(n)]
+        self.beliefs, self.desires = fired.beliefs, desires
         out.events += [self.event(d, "added") for d in added]
-        out.events += [self.event(self.desires[n], "boosted") for n in fired.boosted]
+        out.events += [self.event(self.desires[n], "boosted") for n in boosted]
+
+    def _unclaimed(self, desires: dict[str, Desire]) -> dict[str, Desire]:
+        """Leave out what rules just added to our desires that another agent owns."""
+        claims = self.claims
+        if claims is None:
+            return desires
+        out = {}
+        for name, d in desires.items():
+            held = self.desires.get(name)
+            old = set(held.goal) if held is not None else set()
+            goal = tuple(g for g in d.goal if g in old or claims.foreign(g.atom) is None)
+            if goal:
+                out[name] = replace(d, goal=goal) if goal != d.goal else d
+        return out
 
     def _deliberate(self, out: Reaction) -> None:
         current = self.intentions.current
@@ -86,8 +106,7 @@ class Mind:
         active = self.intentions.current.desire.name if self.intentions.current else None
         for drop in drops(self.desires, self.beliefs, self.now, active):
             desire = self.desires.pop(drop.desire)
-            out.events.append(self.event(desire, "dropped", drop.reason))
-            self.refire = True
+            self._dropped(desire, drop.reason, out)
             if drop.desire == active:
                 out.commands += self.intentions.drop(drop.reason)
         for name, d in list(self.desires.items()):
@@ -126,6 +145,43 @@ class Mind:
         for c in commands:
             if c.kind == "drop" and c.desire is not None:
                 self.desires.pop(c.desire.name, None)
-                out.events.append(self.event(c.desire, "dropped", c.reason))
-                self.refire = True
+                self._dropped(c.desire, c.reason, out)
         return out
+
+    def _dropped(self, desire: Desire, reason: str, out: Reaction) -> None:
+        out.events.append(self.event(desire, "dropped", reason))
+        self.refire = True
+        if self.claims is not None:  # others may take up what we gave up
+            out.claims += self.claims.release(g.atom for g in desire.goal)
+
+    # -- claims in the group -------------------------------------------------------------
+    def on_claim(self, claim: Claim) -> Reaction:
+        """Another agent of the group claimed (or released) a goal object."""
+        out = Reaction()
+        if self.claims is None or not self.claims.on_claim(claim):
+            return out
+        self.refire = self.refire or claim.released  # the rules may take the item up now
+        self._coordinate(out)
+        self._deliberate(out)
+        return out
+
+    def _coordinate(self, out: Reaction) -> None:
+        """Claim the objects of our goals; leave those another agent owns."""
+        claims = self.claims
+        if claims is None:
+            return
+        for name, desire in list(self.desires.items()):
+            mine = [g for g in desire.goal if claims.foreign(g.atom) is None]
+            out.claims += claims.claim((g.atom for g in mine), self.epoch)
+            if len(mine) == len(desire.goal):
+                continue
+            left = [g.atom for g in desire.goal if g not in mine]
+            owners = sorted({f"{' '.join(a)} by {claims.foreign(a)}" for a in left})
+            if mine:
+                self.desires[name] = replace(desire, goal=tuple(mine))
+                continue
+            del self.desires[name]
+            reason = "claimed by others: " + ", ".join(owners)
+            self._dropped(desire, reason, out)
+            if self.intentions.current is not None and self.intentions.current.desire.name == name:
+                out.commands += self.intentions.drop(reason)

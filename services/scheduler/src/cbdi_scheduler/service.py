@@ -21,7 +21,14 @@ from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
-from cbdi.wire.agent import ActionStatus, AgentRequest, ArrestReport, EarlyArrest, PartialPlan
+from cbdi.wire.agent import (
+    ActionStatus,
+    AgentRequest,
+    ArrestReport,
+    Claim,
+    EarlyArrest,
+    PartialPlan,
+)
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import ActionOutcome, Percepts
@@ -39,6 +46,7 @@ INPUTS: tuple[type[Message], ...] = (
     SearchStatus,
     ActionStatus,
     ArrestReport,
+    Claim,
 )
 
 
@@ -68,6 +76,7 @@ class SchedulerService:
             keys.planner_status(a),
             keys.executor_status(a),
             keys.executor_arrested(a),
+            *([keys.scheduler_claims_all()] if self.mind.claims is not None else []),
         ]
 
     async def load_map(self) -> None:
@@ -101,6 +110,18 @@ class SchedulerService:
                 key = keys.planner_requests(self.agent)
                 await publish(self.ctx.bus, key, self.last_search, block=True)
 
+    async def watch_group(self) -> None:
+        """Tell an agent that appears our standing claims (it missed them)."""
+        claims = self.mind.claims
+        if claims is None:
+            return
+        async for event in self.ctx.bus.watch_alive(keys.alive(keys.service_id("scheduler", "*"))):
+            if event.alive:
+                for claim in claims.mine():
+                    await publish(
+                        self.ctx.bus, keys.scheduler_claims(self.agent), claim, block=True
+                    )
+
     async def on_request(self, key: str, req: AgentRequest) -> Message:
         """Serve another agent's request (the next cycle reacts to what it changed)."""
         reply = serve_request(self.mind, req)
@@ -129,11 +150,16 @@ class SchedulerService:
             return Reaction()
         if isinstance(msg, ActionStatus):
             return mind.on_status(msg)
+        if isinstance(msg, Claim):
+            return mind.on_claim(msg)
         assert isinstance(msg, ArrestReport)
         return mind.on_arrested(msg)
 
     async def act(self, reaction: Reaction) -> None:
         bus, a = self.ctx.bus, self.agent
+        for claim in reaction.claims:
+            self.ctx.log.info("claim", item=claim.item, released=claim.released)
+            await publish(bus, keys.scheduler_claims(a), claim, block=True)
         for event in reaction.events:
             self.ctx.log.info("desire", desire=event.desire, what=event.event, reason=event.reason)
             await publish(bus, keys.scheduler_desires(a), event, block=True)
@@ -185,5 +211,6 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
         ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
         ctx.start(service.run(stream, settings.load_map), name="scheduler")
         ctx.start(service.watch_planner(), name="planner-watch")
+        ctx.start(service.watch_group(), name="group-watch")
 
     return body

@@ -18,6 +18,7 @@ __all__ = [
     "ArrestReport",
     "BeliefsUpdate",
     "Check",
+    "Claim",
     "DesireEvent",
     "EarlyArrest",
     "PartialPlan",
@@ -143,3 +144,16 @@ class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
     accepted: bool
     holds: bool = False
     reason: str = ""
+
+
+class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
+    """An agent claims (or, `released`, gives up) a goal object within its group.
+
+    The earliest claim (`epoch`, then agent name) owns the object; the others leave it.
+    """
+
+    agent: str
+    group: str
+    item: str
+    epoch: int = -1
+    released: bool = False

@@ -1,0 +1,95 @@
+"""Claims: robots of one group never pursue the same litter item (pure logic, two minds)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cbdi.beliefs import fact
+from cbdi.wire.agent import Claim
+from cbdi.wire.world import LitterView, Percepts
+from cbdi_scheduler.agentfile import load_agent
+from cbdi_scheduler.claims import Claims
+from cbdi_scheduler.mind import Mind, Reaction
+
+AGENT = Path(__file__).resolve().parents[2] / "domains/recycling/agents/recycler.toml"
+
+
+def seen(agent: str, epoch: int, *litter: tuple[str, tuple[int, int]]) -> Percepts:
+    return Percepts(
+        agent=agent,
+        epoch=epoch,
+        time=float(epoch),
+        position=(0, 1),
+        depth=1,
+        free=[(1, 1)],
+        blocked=[(0, 0)],
+        holding=[],
+        litter=[LitterView(name=n, cell=c) for n, c in litter],
+    )
+
+
+def goal(mind: Mind) -> list[tuple[str, ...]]:
+    desire = mind.desires.get("recycle")
+    return [g.atom for g in desire.goal] if desire else []
+
+
+def tell(reaction: Reaction, *minds: Mind) -> list[Reaction]:
+    return [m.on_claim(c) for c in reaction.claims for m in minds]
+
+
+def test_the_earliest_claim_owns_an_item_ties_go_to_the_first_name() -> None:
+    a = Claims("robot2", "recyclers", frozenset({"recycled"}))
+    assert [c.item for c in a.claim([("recycled", "p1"), ("in", "robot2", "c")], 5)] == ["p1"]
+    assert a.claim([("recycled", "p1")], 6) == []  # claimed once
+    assert a.foreign(("recycled", "p1")) is None
+    assert a.on_claim(Claim(agent="robot3", group="recyclers", item="p1", epoch=4))
+    assert a.foreign(("recycled", "p1")) == "robot3"
+    assert a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=4))
+    assert a.owner("p1") == "robot1"  # same epoch: the first name
+    assert not a.on_claim(Claim(agent="robot9", group="others", item="p1", epoch=0))
+    a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", released=True))
+    a.on_claim(Claim(agent="robot3", group="recyclers", item="p1", released=True))
+    assert a.owner("p1") == "robot2" and [c.item for c in a.mine()] == ["p1"]
+
+
+def test_two_robots_seeing_the_same_litter_share_it_out() -> None:
+    r1 = Mind(load_agent(AGENT, "robot1"))
+    r2 = Mind(load_agent(AGENT, "robot2"))
+    # Both see p1 in the same epoch; robot2 also sees p2.
+    out1 = r1.on_percepts(seen("robot1", 0, ("p1", (1, 1))))
+    out2 = r2.on_percepts(seen("robot2", 0, ("p1", (1, 1)), ("p2", (1, 2))))
+    assert [c.item for c in out1.claims] == ["p1"]
+    assert sorted(c.item for c in out2.claims) == ["p1", "p2"]
+    tell(out1, r2)
+    tell(out2, r1)
+    assert goal(r1) == [("recycled", "p1")]  # robot1 won the tie on p1
+    assert goal(r2) == [("recycled", "p2")]
+    # robot2 searches again for what is left of its goal: a new search, not a union.
+    assert r2.claims is not None and r2.claims.owner("p1") == "robot1"
+
+
+def test_a_robot_whose_whole_goal_is_taken_drops_it_and_the_item_returns_on_release() -> None:
+    r1 = Mind(load_agent(AGENT, "robot1"))
+    r2 = Mind(load_agent(AGENT, "robot2"))
+    out1 = r1.on_percepts(seen("robot1", 0, ("p1", (1, 1))))
+    tell(out1, r2)  # robot1 claimed p1 at epoch 0
+    out2 = r2.on_percepts(seen("robot2", 1, ("p1", (1, 1))))
+    assert out2.claims == [] and "recycle" not in r2.desires  # never taken up
+    assert r2.intentions.current is None
+    # robot1 gives p1 up (its desire dropped): robot2 takes it.
+    r1.desires.pop("recycle")
+    assert r1.claims is not None
+    released = Reaction(claims=r1.claims.release([("recycled", "p1")]))
+    tell(released, r2)
+    again = r2.on_percepts(seen("robot2", 2, ("p1", (1, 1))))
+    assert [c.item for c in again.claims] == ["p1"] and goal(r2) == [("recycled", "p1")]
+
+
+def test_losing_part_of_an_active_goal_restarts_the_search_without_it() -> None:
+    r2 = Mind(load_agent(AGENT, "robot2"))
+    out = r2.on_percepts(seen("robot2", 3, ("p1", (1, 1)), ("p2", (1, 2))))
+    assert [c.kind for c in out.commands] == ["start_search"]
+    late = r2.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=2))
+    starts = [c for c in late.commands if c.kind == "start_search"]
+    assert starts and starts[0].reason == "goal reduced"
+    assert starts[0].desire is not None and starts[0].desire.goal == (fact("recycled", "p2"),)
