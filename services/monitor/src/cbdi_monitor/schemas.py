@@ -9,6 +9,7 @@ import msgspec
 
 import cbdi.wire.agent
 import cbdi.wire.common
+import cbdi.wire.planner
 import cbdi.wire.world
 from cbdi.wire.base import Message, schema_of
 
@@ -52,4 +53,4 @@ def json_schema(name: str) -> bytes:
 
 
 # Imported for their side effect: every message class is then a known subclass.
-_MODULES = (cbdi.wire.agent, cbdi.wire.common, cbdi.wire.world)
+_MODULES = (cbdi.wire.agent, cbdi.wire.common, cbdi.wire.planner, cbdi.wire.world)
