@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cbdi.beliefs import fact
+from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
 from cbdi.wire.world import LitterView, Percepts
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.claims import Claims
+from cbdi_scheduler.events import UNKNOWN_DISTANCE, distance
 from cbdi_scheduler.mind import Mind, Reaction
 
 AGENT = Path(__file__).resolve().parents[2] / "domains/recycling/agents/recycler.toml"
@@ -39,17 +40,50 @@ def tell(reaction: Reaction, *minds: Mind) -> list[Reaction]:
 
 def test_the_earliest_claim_owns_an_item_ties_go_to_the_first_name() -> None:
     a = Claims("robot2", "recyclers", frozenset({"recycled"}))
-    assert [c.item for c in a.claim([("recycled", "p1"), ("in", "robot2", "c")], 5)] == ["p1"]
-    assert a.claim([("recycled", "p1")], 6) == []  # claimed once
+    assert [c.item for c in a.claim([("recycled", "p1"), ("in", "robot2", "c")], 20)] == ["p1"]
+    assert a.claim([("recycled", "p1")], 21) == []  # claimed once
     assert a.foreign(("recycled", "p1")) is None
     assert a.on_claim(Claim(agent="robot3", group="recyclers", item="p1", epoch=4))
-    assert a.foreign(("recycled", "p1")) == "robot3"
-    assert a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=4))
-    assert a.owner("p1") == "robot1"  # same epoch: the first name
+    assert a.foreign(("recycled", "p1")) == "robot3"  # robot2's claim came too late
+    assert a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=6))
+    assert a.owner("p1") == "robot1"  # within the window, same cost: the first name
     assert not a.on_claim(Claim(agent="robot9", group="others", item="p1", epoch=0))
     a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", released=True))
     a.on_claim(Claim(agent="robot3", group="recyclers", item="p1", released=True))
     assert a.owner("p1") == "robot2" and [c.item for c in a.mine()] == ["p1"]
+
+
+def test_at_the_same_epoch_the_nearest_robot_owns_the_item() -> None:
+    a = Claims("robot1", "recyclers", frozenset({"recycled"}))
+    a.claim([("recycled", "p1"), ("recycled", "p2")], 0, {"p1": 7.0, "p2": 2.0}.__getitem__)
+    a.on_claim(Claim(agent="robot2", group="recyclers", item="p1", epoch=0, cost=3.0))
+    a.on_claim(Claim(agent="robot2", group="recyclers", item="p2", epoch=0, cost=5.0))
+    assert a.owner("p1") == "robot2" and a.owner("p2") == "robot1"
+    a.on_claim(Claim(agent="robot3", group="recyclers", item="p2", epoch=9, cost=0.0))
+    assert a.owner("p2") == "robot1"  # a much later claim never takes an item over
+
+
+def test_a_robot_near_all_the_litter_does_not_get_all_of_it() -> None:
+    costs = {"robot1": (8, 9, 8), "robot2": (7, 8, 7), "robot3": (4, 5, 6)}  # the 7x7 map
+    items = ("p36", "p46", "p61")
+    views = {a: Claims(a, "recyclers", frozenset({"recycled"})) for a in costs}
+    sent = []
+    for a, view in views.items():
+        cost = dict(zip(items, costs[a], strict=True))
+        sent += view.claim([("recycled", i) for i in items], 0, cost.__getitem__)
+    for view in views.values():
+        for claim in sent:
+            view.on_claim(claim)
+    expected = {"p36": "robot3", "p46": "robot2", "p61": "robot1"}
+    assert all(view.assignment() == expected for view in views.values())
+
+
+def test_distance_follows_the_believed_cells() -> None:
+    near = [fact("near", x, y) for x, y in ("ab", "ba", "bc", "cb")]
+    beliefs = BeliefSet.of([fact("in", "r", "a"), fact("litter_pose", "p", "c"), *near])
+    assert distance(beliefs, "r", "p") == 2.0
+    assert distance(beliefs, "r", "elsewhere") == UNKNOWN_DISTANCE
+    assert distance(beliefs.adding([fact("holding", "r", "p")]), "r", "p") == 0.0
 
 
 def test_two_robots_seeing_the_same_litter_share_it_out() -> None:

@@ -3,8 +3,13 @@
 An agent file lists claimable goal predicates (`[scheduler] claim = ["recycled"]`). When
 a desire's goal holds an atom of one (`(recycled pla61)`), the agent claims its first
 argument (the item) in its group: it tells every agent of the group, who tell it of
-theirs. The owner of an item is the agent with the earliest claim (epoch, then name, so
-every agent decides alike without a further round of messages); an agent strips the
+theirs. Every agent computes the same assignment from the same claims, with no further
+round of messages: only claims made within `WINDOW` epochs of an item's first claim
+compete for it (agents that saw it at about the same time; a later claim never takes
+an item over); items are assigned in order of their earliest claim, then their
+cheapest claim (`cost`: the claimer's path length to it), and each goes to the claimer
+with the lowest cost plus `LOAD_COST` for every item it already got (so one robot near
+all the litter does not get all of it), ties to the first name; an agent strips the
 atoms of items others own from its desires, and drops a desire left with no goal. A
 claim is released when the agent gives the atom up (its desire dropped), so another
 agent may take the item.
@@ -12,12 +17,15 @@ agent may take the item.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from cbdi.wire.agent import Claim
 
-__all__ = ["Claims"]
+__all__ = ["LOAD_COST", "WINDOW", "Claims"]
+
+LOAD_COST = 5.0  # what one more item in hand weighs against a longer way to the next
+WINDOW = 5  # epochs: claims this close to an item's first claim compete for it
 
 
 @dataclass
@@ -27,7 +35,8 @@ class Claims:
     agent: str
     group: str
     predicates: frozenset[str]
-    held: dict[str, dict[str, int]] = field(default_factory=dict)  # item -> agent -> epoch
+    held: dict[str, dict[str, tuple[int, float]]] = field(default_factory=dict)
+    # item -> agent -> (epoch, cost) of its claim
 
     def claimable(self, atom: tuple[str, ...]) -> str | None:
         """Return the item `atom` claims, or None if its predicate is not claimable."""
@@ -35,15 +44,21 @@ class Claims:
             return atom[1]
         return None
 
-    def claim(self, atoms: Iterable[tuple[str, ...]], epoch: int) -> list[Claim]:
+    def claim(
+        self,
+        atoms: Iterable[tuple[str, ...]],
+        epoch: int,
+        cost: Callable[[str], float] = lambda item: 0.0,
+    ) -> list[Claim]:
         """Claim the items of `atoms` not claimed by this agent yet; return the messages."""
         out = []
         for atom in atoms:
             item = self.claimable(atom)
             if item is None or self.agent in self.held.get(item, {}):
                 continue
-            self.held.setdefault(item, {})[self.agent] = epoch
-            out.append(Claim(agent=self.agent, group=self.group, item=item, epoch=epoch))
+            c = float(cost(item))
+            self.held.setdefault(item, {})[self.agent] = (epoch, c)
+            out.append(Claim(agent=self.agent, group=self.group, item=item, epoch=epoch, cost=c))
         return out
 
     def release(self, atoms: Iterable[tuple[str, ...]]) -> list[Claim]:
@@ -64,15 +79,30 @@ class Claims:
         if claim.released:
             holders.pop(claim.agent, None)
         else:
-            holders[claim.agent] = min(claim.epoch, holders.get(claim.agent, claim.epoch))
+            mine = (claim.epoch, claim.cost)
+            holders[claim.agent] = min(mine, holders.get(claim.agent, mine))
         return True
 
     def owner(self, item: str) -> str | None:
-        """Return the agent whose claim on `item` came first (None: nobody claims it)."""
-        holders = self.held.get(item)
-        if not holders:
-            return None
-        return min(holders.items(), key=lambda kv: (kv[1], kv[0]))[0]
+        """Return the agent `item` is assigned to (None: nobody claims it)."""
+        return self.assignment().get(item)
+
+    def assignment(self) -> dict[str, str]:
+        """Return every claimed item's owner (the same at every agent with these claims)."""
+        contests = []
+        for item, holders in self.held.items():
+            if not holders:
+                continue
+            first = min(epoch for epoch, _ in holders.values())
+            bids = {a: cost for a, (epoch, cost) in holders.items() if epoch <= first + WINDOW}
+            contests.append((first, min(bids.values()), item, bids))
+        load: dict[str, int] = {}
+        owners = {}
+        for _, _, item, bids in sorted(contests, key=lambda c: c[:3]):
+            winner = min(bids, key=lambda a: (bids[a] + LOAD_COST * load.get(a, 0), a))
+            owners[item] = winner
+            load[winner] = load.get(winner, 0) + 1
+        return owners
 
     def foreign(self, atom: tuple[str, ...]) -> str | None:
         """Return the other agent that owns `atom`'s item, or None if it is free or ours."""
@@ -85,7 +115,13 @@ class Claims:
     def mine(self) -> list[Claim]:
         """This agent's standing claims (sent again when a new agent appears)."""
         return [
-            Claim(agent=self.agent, group=self.group, item=item, epoch=holders[self.agent])
+            Claim(
+                agent=self.agent,
+                group=self.group,
+                item=item,
+                epoch=holders[self.agent][0],
+                cost=holders[self.agent][1],
+            )
             for item, holders in sorted(self.held.items())
             if self.agent in holders
         ]

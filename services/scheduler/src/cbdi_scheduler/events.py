@@ -11,7 +11,13 @@ from __future__ import annotations
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
 
-__all__ = ["cell_name", "map_beliefs", "revise_from_outcome", "revise_from_percepts"]
+__all__ = [
+    "cell_name",
+    "distance",
+    "map_beliefs",
+    "revise_from_outcome",
+    "revise_from_percepts",
+]
 
 
 def cell_name(cell: Cell) -> str:
@@ -90,3 +96,29 @@ def map_beliefs(
             fact("litter_pose", item.name, cell_name((item.cell[0], item.cell[1]))),
         ]
     return out
+
+
+UNKNOWN_DISTANCE = 1e9  # finite: it travels in JSON exports too
+
+
+def distance(beliefs: BeliefSet, agent: str, item: str) -> float:
+    """Return the believed path length (over `near`) from `agent` to litter `item`: 0 if
+    it holds it, UNKNOWN_DISTANCE if either place or a path is unknown."""
+    if ("holding", agent, item) in beliefs.facts:
+        return 0.0
+    here = next((f[2] for f in beliefs.facts if f[:2] == ("in", agent)), None)
+    there = next((f[2] for f in beliefs.facts if f[:2] == ("litter_pose", item)), None)
+    if here is None or there is None:
+        return UNKNOWN_DISTANCE
+    near: dict[str, list[str]] = {}
+    for f in beliefs.facts:
+        if f[0] == "near":
+            near.setdefault(f[1], []).append(f[2])
+    seen, frontier, steps = {here}, [here], 0
+    while frontier:
+        if there in frontier:
+            return float(steps)
+        steps += 1
+        frontier = [n for c in frontier for n in near.get(c, ()) if n not in seen]
+        seen.update(frontier)
+    return UNKNOWN_DISTANCE

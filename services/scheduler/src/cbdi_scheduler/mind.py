@@ -16,7 +16,7 @@ from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
-from cbdi_scheduler.events import revise_from_outcome, revise_from_percepts
+from cbdi_scheduler.events import distance, revise_from_outcome, revise_from_percepts
 from cbdi_scheduler.intentions import Command, IntentionScheduler
 from cbdi_scheduler.rules import fire_rules
 
@@ -172,7 +172,11 @@ class Mind:
             return
         for name, desire in list(self.desires.items()):
             mine = [g for g in desire.goal if claims.foreign(g.atom) is None]
-            out.claims += claims.claim((g.atom for g in mine), self.epoch)
+            out.claims += claims.claim(
+                (g.atom for g in mine),
+                self.epoch,
+                lambda item: distance(self.beliefs, self.agent, item),
+            )
             if len(mine) == len(desire.goal):
                 continue
             left = [g.atom for g in desire.goal if g not in mine]

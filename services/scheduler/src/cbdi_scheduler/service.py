@@ -158,7 +158,13 @@ class SchedulerService:
     async def act(self, reaction: Reaction) -> None:
         bus, a = self.ctx.bus, self.agent
         for claim in reaction.claims:
-            self.ctx.log.info("claim", item=claim.item, released=claim.released)
+            self.ctx.log.info(
+                "claim",
+                item=claim.item,
+                epoch=claim.epoch,
+                cost=claim.cost,
+                released=claim.released,
+            )
             await publish(bus, keys.scheduler_claims(a), claim, block=True)
         for event in reaction.events:
             self.ctx.log.info("desire", desire=event.desire, what=event.event, reason=event.reason)

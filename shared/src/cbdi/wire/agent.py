@@ -149,11 +149,13 @@ class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
 class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     """An agent claims (or, `released`, gives up) a goal object within its group.
 
-    The earliest claim (`epoch`, then agent name) owns the object; the others leave it.
+    The earliest claim (`epoch`), then the cheapest (`cost`: the claimer's distance to
+    it), then the first agent name owns the object; the others leave it.
     """
 
     agent: str
     group: str
     item: str
     epoch: int = -1
+    cost: float = 0.0
     released: bool = False
