@@ -66,3 +66,18 @@ def wait_for(predicate: object, timeout: float = 20.0, what: str = "condition") 
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.05)
+
+
+CBDI = str(BIN / "cbdi") if (BIN / "cbdi").exists() else "cbdi"
+
+
+def cbdi_up(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    """Run `cbdi up ARGS` from the repository; return what it printed and its exit code."""
+    return subprocess.run(
+        [CBDI, "up", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=REPO,
+        stdin=subprocess.DEVNULL,
+    )

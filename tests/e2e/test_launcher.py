@@ -11,22 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from tests_support import BIN, REPO, wait_for
+from tests_support import CBDI, REPO, cbdi_up, wait_for
 
 pytestmark = pytest.mark.e2e
 
-CBDI = str(BIN / "cbdi") if (BIN / "cbdi").exists() else "cbdi"
-
-
-def up(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [CBDI, "up", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=REPO,
-        stdin=subprocess.DEVNULL,
-    )
+up = cbdi_up
 
 
 def test_corridor_run_ends_done_with_json_summary() -> None:
@@ -42,7 +31,7 @@ def test_corridor_run_ends_done_with_json_summary() -> None:
 
 
 def test_several_agents_share_one_world() -> None:
-    result = up("paper-7x7", "--agents", "3", "--speed", "40", "--json", "--quiet")
+    result = up("paper-7x7-scripted", "--agents", "3", "--speed", "40", "--json", "--quiet")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     agents = summary["stats"]["agents"]
@@ -54,7 +43,7 @@ def test_several_agents_share_one_world() -> None:
 def test_bdi_agent_recycles_everything_in_the_paper_scenario() -> None:
     """Planner, scheduler and executor processes: the agent senses the litter, takes up the
     desire, plans with cbdi's planner, executes and recycles all three items."""
-    result = up("paper-7x7-bdi", "--speed", "20", "--json", "--quiet")
+    result = up("paper-7x7", "--speed", "20", "--json", "--quiet")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["result"] == "done"
@@ -73,7 +62,7 @@ def test_bdi_agent_recycles_everything_in_the_paper_scenario() -> None:
 
 
 def test_time_limited_run_and_seconds_until() -> None:
-    result = up("paper-7x7", "--until", "5", "--speed", "20", "--json", "--quiet")
+    result = up("paper-7x7-scripted", "--until", "5", "--speed", "20", "--json", "--quiet")
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["result"] == "time_limit" and summary["epochs"] == 5
@@ -90,7 +79,7 @@ def test_unknown_scenario_and_bad_options_exit_2() -> None:
 def _start_and_kill_agent(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen[str], Path]:
     log = tmp_path / "up.log"
     proc = subprocess.Popen(
-        [CBDI, "up", "paper-7x7", "--speed", "6", "--json", *extra],
+        [CBDI, "up", "paper-7x7-scripted", "--speed", "6", "--json", *extra],
         stdout=subprocess.PIPE,
         stderr=log.open("w"),
         text=True,
@@ -133,7 +122,7 @@ def test_restart_policy_never_fails_the_run(tmp_path: Path) -> None:
 def test_ctrl_c_stops_everything(tmp_path: Path) -> None:
     log = tmp_path / "up.log"
     proc = subprocess.Popen(
-        [CBDI, "up", "paper-7x7", "--speed", "1", "--json"],
+        [CBDI, "up", "paper-7x7-scripted", "--speed", "1", "--json"],
         stdout=subprocess.PIPE,
         stderr=log.open("w"),
         text=True,
@@ -199,3 +188,15 @@ def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> 
     ][:17]
     moves_at = [i for i in range(1, len(person1)) if person1[i] != person1[i - 1]]
     assert moves_at[:2] == [8, 16]  # one step every 8 epochs
+
+
+def test_bdi_agent_plans_then_acts_in_offline_mode() -> None:
+    """`--mode offline`: the paper's baseline, a complete plan before acting, no rounds."""
+    result = up("paper-7x7", "--mode", "offline", "--speed", "20", "--json", "--quiet")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "done"
+    assert summary["stats"]["agents"]["robot1"]["recycled"] == 3
+    planner = summary["planner"]["agents"]["robot1"]
+    assert planner["plans"] >= 1 and planner["search_rounds"] == 0
+    assert planner["forecast_repairs"] == 0

@@ -40,7 +40,9 @@ def run(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, str]:
     out = tmp_path_factory.mktemp("rec") / "paper.mcap"
-    result = run("cbdi", "up", "paper-7x7", "--speed", "40", "--record", str(out), "--json")
+    result = run(
+        "cbdi", "up", "paper-7x7-scripted", "--speed", "40", "--record", str(out), "--json"
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     return out, json.loads(result.stdout), result.stderr
 
@@ -213,7 +215,16 @@ def _screenshot(rrd: Path, shot: Path, tmp: Path) -> None:
 def test_live_view_follows_a_running_system(tmp_path: Path) -> None:
     port = free_port()
     launcher = Proc(
-        [str(BIN / "cbdi"), "up", "paper-7x7", "--speed", "10", "--port", str(port), "--quiet"],
+        [
+            str(BIN / "cbdi"),
+            "up",
+            "paper-7x7-scripted",
+            "--speed",
+            "10",
+            "--port",
+            str(port),
+            "--quiet",
+        ],
         tmp_path / "up.log",
     )
     try:

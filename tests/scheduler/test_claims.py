@@ -127,3 +127,14 @@ def test_losing_part_of_an_active_goal_restarts_the_search_without_it() -> None:
     starts = [c for c in late.commands if c.kind == "start_search"]
     assert starts and starts[0].reason == "goal reduced"
     assert starts[0].desire is not None and starts[0].desire.goal == (fact("recycled", "p2"),)
+
+
+def test_a_robot_holding_an_item_owns_it_whatever_else_was_claimed() -> None:
+    a = Claims("robot2", "recyclers", frozenset({"recycled"}))
+    a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=0, cost=1.0))
+    assert a.claim([("recycled", "p1")], 30, lambda item: 9.0) != []
+    assert a.owner("p1") == "robot1"
+    again = a.claim([("recycled", "p1")], 31, lambda item: 9.0, holding={"p1"})
+    assert [(c.item, c.cost, c.epoch) for c in again] == [("p1", -1.0, 30)]
+    assert a.owner("p1") == "robot2"
+    assert a.claim([("recycled", "p1")], 32, lambda item: 9.0, holding={"p1"}) == []

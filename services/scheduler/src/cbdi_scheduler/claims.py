@@ -9,7 +9,9 @@ compete for it (agents that saw it at about the same time; a later claim never t
 an item over); items are assigned in order of their earliest claim, then their
 cheapest claim (`cost`: the claimer's path length to it), and each goes to the claimer
 with the lowest cost plus `LOAD_COST` for every item it already got (so one robot near
-all the litter does not get all of it), ties to the first name; an agent strips the
+all the litter does not get all of it), ties to the first name. An agent that holds an
+item claims it again with cost `HOLDING` (negative), and a holder owns its item whatever
+the other claims say; an agent strips the
 atoms of items others own from its desires, and drops a desire left with no goal. A
 claim is released when the agent gives the atom up (its desire dropped), so another
 agent may take the item.
@@ -22,10 +24,11 @@ from dataclasses import dataclass, field
 
 from cbdi.wire.agent import Claim
 
-__all__ = ["LOAD_COST", "WINDOW", "Claims"]
+__all__ = ["HOLDING", "LOAD_COST", "WINDOW", "Claims"]
 
 LOAD_COST = 5.0  # what one more item in hand weighs against a longer way to the next
 WINDOW = 5  # epochs: claims this close to an item's first claim compete for it
+HOLDING = -1.0  # the cost of a claim on an item in hand
 
 
 @dataclass
@@ -49,16 +52,23 @@ class Claims:
         atoms: Iterable[tuple[str, ...]],
         epoch: int,
         cost: Callable[[str], float] = lambda item: 0.0,
+        holding: Iterable[str] = (),
     ) -> list[Claim]:
-        """Claim the items of `atoms` not claimed by this agent yet; return the messages."""
+        """Claim the items of `atoms` not claimed by this agent yet, and again those it now
+        holds (cost HOLDING); return the messages."""
+        held = set(holding)
         out = []
         for atom in atoms:
             item = self.claimable(atom)
-            if item is None or self.agent in self.held.get(item, {}):
+            if item is None:
                 continue
-            c = float(cost(item))
-            self.held.setdefault(item, {})[self.agent] = (epoch, c)
-            out.append(Claim(agent=self.agent, group=self.group, item=item, epoch=epoch, cost=c))
+            before = self.held.get(item, {}).get(self.agent)
+            if before is not None and (before[1] < 0 or item not in held):
+                continue
+            c = HOLDING if item in held else float(cost(item))
+            at = before[0] if before is not None else epoch
+            self.held.setdefault(item, {})[self.agent] = (at, c)
+            out.append(Claim(agent=self.agent, group=self.group, item=item, epoch=at, cost=c))
         return out
 
     def release(self, atoms: Iterable[tuple[str, ...]]) -> list[Claim]:
@@ -79,8 +89,7 @@ class Claims:
         if claim.released:
             holders.pop(claim.agent, None)
         else:
-            mine = (claim.epoch, claim.cost)
-            holders[claim.agent] = min(mine, holders.get(claim.agent, mine))
+            holders[claim.agent] = (claim.epoch, claim.cost)
         return True
 
     def owner(self, item: str) -> str | None:
@@ -95,11 +104,13 @@ class Claims:
                 continue
             first = min(epoch for epoch, _ in holders.values())
             bids = {a: cost for a, (epoch, cost) in holders.items() if epoch <= first + WINDOW}
+            bids.update({a: cost for a, (_, cost) in holders.items() if cost < 0})
             contests.append((first, min(bids.values()), item, bids))
         load: dict[str, int] = {}
         owners = {}
         for _, _, item, bids in sorted(contests, key=lambda c: c[:3]):
-            winner = min(bids, key=lambda a: (bids[a] + LOAD_COST * load.get(a, 0), a))
+            holder = [a for a, cost in bids.items() if cost < 0]
+            winner = min(holder or bids, key=lambda a: (bids[a] + LOAD_COST * load.get(a, 0), a))
             owners[item] = winner
             load[winner] = load.get(winner, 0) + 1
         return owners

@@ -151,8 +151,14 @@ class Mind:
     def _dropped(self, desire: Desire, reason: str, out: Reaction) -> None:
         out.events.append(self.event(desire, "dropped", reason))
         self.refire = True
-        if self.claims is not None:  # others may take up what we gave up
-            out.claims += self.claims.release(g.atom for g in desire.goal)
+        if self.claims is not None:  # others may take up what we gave up (not held)
+            held = self._holding()
+            out.claims += self.claims.release(
+                g.atom for g in desire.goal if self.claims.claimable(g.atom) not in held
+            )
+
+    def _holding(self) -> set[str]:
+        return {f[2] for f in self.beliefs.facts if f[:2] == ("holding", self.agent)}
 
     # -- claims in the group -------------------------------------------------------------
     def on_claim(self, claim: Claim) -> Reaction:
@@ -176,6 +182,7 @@ class Mind:
                 (g.atom for g in mine),
                 self.epoch,
                 lambda item: distance(self.beliefs, self.agent, item),
+                holding=self._holding(),
             )
             if len(mine) == len(desire.goal):
                 continue

@@ -261,12 +261,18 @@ def with_situation(
     move_step: int = 0,
     detection_depth: int = -1,
     known_litter: int = -1,
+    spawn_probability: float = -1.0,
 ) -> WorldMap:
     """Return the map set up for one of the paper's situations (0 / -1: keep the map's).
 
-    `move_step` for every person, the agents' `detection_depth`, and how many litter
-    items (the first ones in reading order) agents know at the start.
+    `move_step` for every person, the agents' `detection_depth`, how many litter items
+    (the first ones in reading order) agents know at the start, and the probability of
+    new litter appearing per epoch.
     """
+    if spawn_probability > 1.0:
+        raise MapError(
+            world_map.source, "spawn_probability", f"must be in [0, 1], got {spawn_probability}"
+        )
     if move_step < 0:
         raise MapError(world_map.source, "move_step", f"must be >= 1, got {move_step}")
     people = world_map.people
@@ -283,4 +289,7 @@ def with_situation(
             )
         order = sorted(litter, key=lambda n: (litter[n][0][1], litter[n][0][0]))
         litter = {n: (litter[n][0], i < known_litter) for i, n in enumerate(order)}
-    return replace(world_map, people=people, detection_depth=depth, litter=litter)
+    spawn = world_map.spawn_probability if spawn_probability < 0 else spawn_probability
+    return replace(
+        world_map, people=people, detection_depth=depth, litter=litter, spawn_probability=spawn
+    )

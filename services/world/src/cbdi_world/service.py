@@ -57,6 +57,9 @@ class WorldSettings(ServiceSettings):
     known_litter: int = field(
         default=-1, metadata={"help": "litter items known at start, first in reading order"}
     )
+    spawn: float = field(
+        default=-1.0, metadata={"help": "probability of new litter per epoch (-1: map's)"}
+    )
 
 
 def agent_specs(
@@ -230,6 +233,7 @@ def build_world(settings: WorldSettings) -> World:
         move_step=settings.move_step,
         detection_depth=settings.det_area,
         known_litter=settings.known_litter,
+        spawn_probability=settings.spawn,
     )
     agents = settings.agent or ("robot1",)
     specs = agent_specs(agents, world_map.agent_starts, world_map.detection_depth)

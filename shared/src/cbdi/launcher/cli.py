@@ -47,6 +47,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--move-step", type=int, help="people step every N epochs (paper: 4 or 8)")
     p.add_argument("--det-area", type=int, help="agents' detection depth (paper: 1 to 3)")
     p.add_argument("--known-litter", type=int, help="litter items known at start (paper: 2, 3)")
+    p.add_argument("--spawn", type=float, help="probability of new litter per epoch")
+    p.add_argument(
+        "--mode",
+        choices=("online", "offline"),
+        help="BDI agents plan online (continual planning) or offline (plan, then act)",
+    )
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout at the end")
     p.add_argument(
         "--view",
@@ -85,7 +91,17 @@ def _scenario(args: argparse.Namespace) -> Scenario:
             except ValueError:
                 raise ConfigError("--until", "until", "expected 'done' or seconds > 0") from None
         run = replace(run, until=args.until)
-    for name in ("speed", "seed", "max_time", "lockstep", "move_step", "det_area", "known_litter"):
+    for name in (
+        "speed",
+        "seed",
+        "max_time",
+        "lockstep",
+        "move_step",
+        "det_area",
+        "known_litter",
+        "spawn",
+        "mode",
+    ):
         value = getattr(args, name)
         if value is not None:
             run = replace(run, **{name: value})

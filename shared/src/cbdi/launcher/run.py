@@ -91,7 +91,7 @@ def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessS
         world_args += ["--max-time", run.until, "--no-stop-when-done"]
     world_args += ["--lockstep" if run.lockstep else "--no-lockstep"]
     world_args += ["--move-step", str(run.move_step), "--det-area", str(run.det_area)]
-    world_args += ["--known-litter", str(run.known_litter)]
+    world_args += ["--known-litter", str(run.known_litter), "--spawn", str(run.spawn)]
     for agent in scenario.agents:
         own = agent.detection_depth is not None and run.det_area < 0
         depth = f":{agent.detection_depth}" if own else ""
@@ -130,6 +130,8 @@ def _agent_spec(
         argv = argv_of(console_script(*script), "--agent", name)
         if component != "executor":
             argv = argv_of(argv, "--agent-file", str(agent.agent_file))
+        if component == "planner" and scenario.run.mode:
+            argv = argv_of(argv, "--planning", scenario.run.mode)
         return ProcessSpec(keys.service_id(component, name), argv, env)
     if kind == "scripted":
         argv = argv_of(

@@ -63,6 +63,11 @@ class RunSettings:
     move_step: int = 0  # people step every N epochs (0: the map's)
     det_area: int = -1  # the agents' detection depth (-1: the map's or the agent's)
     known_litter: int = -1  # litter items known at the start (-1: the map's)
+    spawn: float = -1.0  # probability of new litter per epoch (-1: the map's)
+    mode: str = ""  # BDI agents' planning: online, offline ("": each agent file's)
+
+
+PLANNING_MODES = ("", "online", "offline")
 
 
 @dataclass(frozen=True)
@@ -197,6 +202,8 @@ def _run(raw: Any, where: str) -> RunSettings:
         if not isinstance(value, type(default)):
             raise ConfigError(where, f"run.{field}", f"expected {type(default).__name__}")
         values[field] = value
+    if values.get("mode", "") not in PLANNING_MODES:
+        raise ConfigError(where, "run.mode", f"expected one of {', '.join(PLANNING_MODES[1:])}")
     unknown = set(raw) - set(vars(base))
     if unknown:
         raise ConfigError(where, "run", f"unknown settings: {', '.join(sorted(unknown))}")

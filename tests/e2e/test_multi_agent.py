@@ -1,0 +1,48 @@
+"""Three BDI robots (nine processes and the world) share the 15x15 warehouse's litter."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from cbdi.wire import decode
+from cbdi.wire.agent import Claim
+from cbdi.wire.world import ActionOutcome, WorldSnapshot
+from cbdi_monitor.reader import read_messages
+from tests_support import cbdi_up
+
+pytestmark = pytest.mark.e2e
+
+
+def test_three_bdi_robots_recycle_all_litter_with_no_item_picked_twice(tmp_path: Path) -> None:
+    rec = tmp_path / "three.mcap"
+    result = cbdi_up("warehouse-15x15-bdi", "--json", "--quiet", "--record", str(rec), timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "done"
+    agents = summary["stats"]["agents"]
+    assert summary["stats"]["litter_recycled"] == 9 and summary["stats"]["litter_on_ground"] == 0
+    assert sum(1 for a in agents.values() if a["recycled"] > 0) >= 2  # the work was shared
+
+    recorded = list(read_messages(rec))
+    outcomes = [
+        decode(m.payload, ActionOutcome)
+        for m in recorded
+        if m.key.startswith("cbdi/world/outcomes/")
+    ]
+    picked = [
+        (o.agent, o.item) for o in outcomes if o.action == "pickup" and o.status == "succeeded"
+    ]
+    assert len(picked) == 9 and len({item for _, item in picked}) == 9  # nobody picked twice
+    claims = [decode(m.payload, Claim) for m in recorded if m.key.endswith("/scheduler/claims")]
+    assert {c.agent for c in claims} == {"robot1", "robot2", "robot3"}
+    for snap in (
+        decode(m.payload, WorldSnapshot) for m in read_messages(rec, ["cbdi/world/snapshot"])
+    ):
+        cells = Counter(tuple(a.cell) for a in snap.agents)
+        assert max(cells.values()) == 1, f"two robots on one cell at epoch {snap.epoch}"
+        people = {tuple(p.cell) for p in snap.people}
+        assert not people & set(cells), f"a robot on a person's cell at epoch {snap.epoch}"
