@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from msgspec.structs import replace
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import LitterView, Percepts
@@ -189,6 +190,30 @@ def test_percepts_revise_the_sensed_square_only() -> None:
     )
     assert after.holds(fact("holding", "robot", "pla9"))
     assert after.fluents[("loaded_amount", "robot")] == 1
+
+
+def test_an_obstacle_out_of_sight_is_forgotten_but_bins_stay() -> None:
+    cells = [instance(f"c_{x}_0", "cell") for x in range(6)]
+    before = BeliefSet.of([*cells, fact("bin_pose", "bin", "c_5_0"), fact("free", "c_1_0")])
+    seen = Percepts(
+        agent="robot",
+        epoch=1,
+        time=1.0,
+        position=(0, 0),
+        depth=1,
+        free=[],
+        blocked=[(1, 0)],  # a person next to the robot
+        holding=[],
+        litter=[],
+    )
+    after = revise_from_percepts(before, seen)
+    assert not after.holds(fact("free", "c_1_0"))
+    assert all(after.holds(fact("free", f"c_{x}_0")) for x in (2, 3, 4))  # assumed free
+    assert not after.holds(fact("free", "c_5_0"))  # the bin
+    moved = replace(seen, epoch=2, position=(3, 0), blocked=[(2, 0)])
+    later = revise_from_percepts(after, moved)
+    assert later.holds(fact("free", "c_1_0"))  # the person was left behind, out of sight
+    assert not later.holds(fact("free", "c_2_0"))
 
 
 def test_map_beliefs_describe_the_grid() -> None:

@@ -2,7 +2,10 @@
 
 Within the sensed square the percepts are the truth: `free` cells are believed free and
 every other cell of the square not free; litter seen is believed where it is seen, and a
-believed item no longer seen in the square is forgotten there. The agent's own cell,
+believed item no longer seen in the square is forgotten there. Outside the square the
+agent assumes free space: people and robots move, so an obstacle once seen is forgotten
+when out of sight (a cell believed blocked for good would wall the robot in), and only
+bins block for good. The agent's own cell,
 what it holds and its load (`loaded_amount`) come with every percept.
 """
 
@@ -43,6 +46,9 @@ def revise_from_percepts(
     me = p.agent
     stale = [fact(*atom) for atom in beliefs.facts if _stale(atom, square, me)]
     fresh = [fact("free", cell_name(c)) for c in p.free]
+    bins = {f[2] for f in beliefs.facts if f[0] == "bin_pose"}
+    unseen = {n for n, t in beliefs.instances.items() if t == "cell"} - square - bins
+    fresh += [fact("free", c) for c in sorted(unseen) if ("free", c) not in beliefs.facts]
     fresh.append(fact("in", me, cell_name(p.position)))
     for item in p.litter:
         fresh += [
