@@ -40,10 +40,12 @@ def test_several_agents_share_one_world() -> None:
     assert summary["stats"]["litter_on_ground"] == 0
 
 
-def test_bdi_agent_recycles_everything_in_the_paper_scenario() -> None:
+def test_bdi_agent_recycles_everything_in_the_paper_scenario(tmp_path: Path) -> None:
     """Planner, scheduler and executor processes: the agent senses the litter, takes up the
-    desire, plans with cbdi's planner, executes and recycles all three items."""
-    result = up("paper-7x7", "--speed", "20", "--json", "--quiet")
+    desire, plans continually, executes and recycles all three items; a person walking
+    onto a cell of its plan is foreseen and the plan repaired before the move fails."""
+    rec = tmp_path / "bdi.mcap"
+    result = up("paper-7x7", "--speed", "10", "--json", "--quiet", "--record", str(rec))
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["result"] == "done"
@@ -59,6 +61,44 @@ def test_bdi_agent_recycles_everything_in_the_paper_scenario() -> None:
     assert planner["search_rounds"] > 0 and planner["plans"] >= 1
     assert planner["replans"] == sum(planner["replans_by"].values())
     assert planner["forecast_repairs"] == planner["replans_by"]["repair"]
+    assert_repaired_before_failure(rec)
+
+
+def assert_repaired_before_failure(rec: Path) -> None:
+    """Some forecast saw a step fail after the committed part; a repair continuing after
+    the committed step followed, and that step never failed in execution."""
+    from cbdi.wire import decode
+    from cbdi.wire.agent import ActionStatus, PartialPlan
+    from cbdi.wire.planner import ForecastReport
+    from cbdi_monitor.reader import read_messages
+
+    recorded = list(read_messages(rec))
+    forecasts = [
+        (m.log_ns, decode(m.payload, ForecastReport))
+        for m in recorded
+        if m.key == "cbdi/robot1/planner/forecasts"
+    ]
+    plans = [
+        (m.log_ns, decode(m.payload, PartialPlan))
+        for m in recorded
+        if m.key == "cbdi/robot1/planner/plans"
+    ]
+    failed = {
+        s.step_id
+        for m in recorded
+        if m.key == "cbdi/robot1/executor/status"
+        and (s := decode(m.payload, ActionStatus)).status == "failed"
+    }
+    repaired = [
+        f
+        for t, f in forecasts
+        if f.kind == "fails_after_committed"
+        and any(
+            t2 >= t and p.plan_id != f.plan_id and p.applies_after == f.committed for t2, p in plans
+        )
+    ]
+    assert repaired, [f for _, f in forecasts]
+    assert any(f.failed_step not in failed for f in repaired)
 
 
 def test_time_limited_run_and_seconds_until() -> None:
