@@ -138,7 +138,12 @@ class Mind:
         return self._with_drops(self.intentions.on_status(status))
 
     def on_arrested(self, report: ArrestReport) -> Reaction:
-        return Reaction(self.intentions.on_arrested(report))
+        before = self.intentions.current
+        out = Reaction(self.intentions.on_arrested(report))
+        after = self.intentions.current
+        if after is not None and (before is None or before.desire.name != after.desire.name):
+            out.events.append(self.event(after.desire, "activated"))  # a clean preemption
+        return out
 
     def _with_drops(self, commands: list[Command]) -> Reaction:
         out = Reaction(commands)
