@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner
 PYTEST_ARGS ?=
 
-.PHONY: venv demo test lint bench bench-planner clean system-tools
+.PHONY: venv demo test lint bench bench-planner bench-continual bench-table1 clean system-tools
 
 venv: $(STAMP)
 
@@ -29,11 +29,12 @@ system-tools:
 	    >/dev/null 2>&1 || echo "warning: could not install$$missing; tests needing them fail"; \
 	fi
 
-# The paper's 7x7 world: one robot, then three sharing it; the second run is recorded
-# to MCAP and inspected (see the README for replay and the rerun viewer).
+# The paper's 7x7 scenario: one BDI robot (planner, scheduler and executor processes),
+# then three sharing the world; the grid every epoch with what each robot intends. The
+# second run is recorded to MCAP and inspected (see the README for replay and rerun).
 demo: venv
-	$(BIN)/cbdi up paper-7x7 --view text --quiet --until done
-	$(BIN)/cbdi up paper-7x7 --agents 3 --view text --quiet --until done --record runs/demo.mcap
+	$(BIN)/cbdi up paper-7x7 --view text --quiet
+	$(BIN)/cbdi up paper-7x7 --agents 3 --view text --quiet --record runs/demo.mcap
 	$(BIN)/cbdi inspect runs/demo.mcap
 
 test: venv system-tools
@@ -55,6 +56,14 @@ bench: venv
 BENCH_PLANNER_ARGS ?=
 bench-planner: venv
 	$(BIN)/python benchmarks/planner.py $(BENCH_PLANNER_ARGS)
+
+# Continual vs offline planning on the 7x7, 15x15 and 30x30 recycling problems.
+bench-continual: venv
+	$(BIN)/python benchmarks/continual.py
+
+# The paper's Table I situations, offline and online, one run each, beside its numbers.
+bench-table1: venv
+	$(BIN)/python benchmarks/table1.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

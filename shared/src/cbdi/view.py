@@ -1,14 +1,15 @@
 """A plain text view of the world: one character grid per epoch.
 
-`render` is pure (info + snapshot -> text); `follow_text` draws every snapshot it hears;
-`cbdi view` runs it against a live run.
+`render` is pure (info + snapshot + what each agent intends -> text); `follow_text` draws
+every snapshot it hears, with the intentions the agents' schedulers report (desire
+events); `cbdi view` runs it against a live run.
 """
 
 from __future__ import annotations
 
 import asyncio
 import string
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TextIO
 
@@ -20,15 +21,17 @@ from cbdi.bus.base import Bus
 from cbdi.bus.zenoh_bus import open_bus
 from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceSettings, load_config
+from cbdi.wire.agent import DesireEvent
 from cbdi.wire.world import WorldInfo, WorldInfoRequest, WorldSnapshot
 
-__all__ = ["follow_text", "main", "render"]
+__all__ = ["Intentions", "follow_text", "main", "render"]
 
 _AGENT_MARKS = string.digits[1:] + string.ascii_uppercase
 
 
-def render(info: WorldInfo, snap: WorldSnapshot) -> str:
-    """Draw the grid: `#` wall, `B` bin, `@` person, `*` litter, 1-9/A-Z robots."""
+def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | None = None) -> str:
+    """Draw the grid: `#` wall, `B` bin, `@` person, `*` litter, 1-9/A-Z robots; then what
+    each agent intends (`intents`: agent -> text), if known."""
     grid = [["." for _ in range(info.width)] for _ in range(info.height)]
     for x, y in info.walls:
         grid[y][x] = "#"
@@ -50,7 +53,33 @@ def render(info: WorldInfo, snap: WorldSnapshot) -> str:
         f"  recycled {len(snap.recycled)}"
     )
     rows = [" ".join(row) for row in grid]
-    return "\n".join([header, *rows, "  ".join(legend)])
+    intending = [f"{a}: {text}" for a, text in sorted((intents or {}).items())]
+    return "\n".join([header, *rows, "  ".join(legend), *intending])
+
+
+class Intentions:
+    """What each agent pursues, from its scheduler's desire events."""
+
+    def __init__(self) -> None:
+        self.current: dict[str, str] = {}  # agent -> desire name
+        self.text: dict[str, str] = {}
+
+    def on_event(self, e: DesireEvent) -> None:
+        goal = " ".join("(" + " ".join(g) + ")" for g in e.goal)
+        pursued = self.current.get(e.agent) == e.desire
+        if e.event == "activated" or (e.event == "boosted" and pursued):
+            self.current[e.agent] = e.desire
+            self.text[e.agent] = f"intends {e.desire} {goal}"
+        elif e.event in ("achieved", "dropped") and pursued:
+            del self.current[e.agent]
+            why = f" ({e.reason})" if e.reason else ""
+            self.text[e.agent] = f"{e.event} {e.desire}{why}"
+
+
+async def _follow_intentions(bus: Bus, intentions: Intentions) -> None:
+    events = messages(bus, keys.agent_stream("*", "scheduler", "desires"), DesireEvent, LogSink())
+    async for _, event in events:
+        intentions.on_event(event)
 
 
 async def world_info(bus: Bus, timeout: float = 10.0) -> WorldInfo:
@@ -69,14 +98,19 @@ async def follow_text(bus: Bus, out: TextIO, frames: int = 0) -> None:
     With `frames` > 0, stop after that many frames.
     """
     snaps = messages(bus, keys.world_stream("snapshot"), WorldSnapshot, LogSink())
-    info = await world_info(bus)
-    clear = "\x1b[2J\x1b[H" if out.isatty() else ""
-    async for _, snap in snaps:
-        out.write(f"{clear}{render(info, snap)}\n\n")
-        out.flush()
-        frames -= 1
-        if frames == 0:
-            return
+    intentions = Intentions()
+    follower = asyncio.create_task(_follow_intentions(bus, intentions))
+    try:
+        info = await world_info(bus)
+        clear = "\x1b[2J\x1b[H" if out.isatty() else ""
+        async for _, snap in snaps:
+            out.write(f"{clear}{render(info, snap, intentions.text)}\n\n")
+            out.flush()
+            frames -= 1
+            if frames == 0:
+                return
+    finally:
+        follower.cancel()
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,52 @@
+"""The text view: the grid, and what each agent intends from its desire events."""
+
+from __future__ import annotations
+
+from cbdi.view import Intentions, render
+from cbdi.wire.agent import DesireEvent
+from cbdi.wire.world import AgentView, BinView, LitterView, PersonView, WorldInfo, WorldSnapshot
+
+
+def event(what: str, desire: str = "recycle", goal: tuple[str, ...] = ("p1",)) -> DesireEvent:
+    return DesireEvent(
+        agent="robot1",
+        desire=desire,
+        event=what,
+        reason="deadline passed" if what == "dropped" else "",
+        time=1.0,
+        goal=[["recycled", g] for g in goal],
+    )
+
+
+def test_the_view_shows_the_grid_and_what_each_agent_intends() -> None:
+    info = WorldInfo(
+        map_name="m",
+        width=3,
+        height=2,
+        walls=[(2, 0)],
+        bins=[BinView(name="bin", cell=(0, 0))],
+        agents=["robot1"],
+        detection_depth={"robot1": 1},
+        capacity=3,
+        epoch_duration=1.0,
+        durations={"move": 1.0},
+    )
+    snap = WorldSnapshot(
+        epoch=4,
+        time=4.0,
+        agents=[AgentView(name="robot1", cell=(1, 1), pose=(1.0, 1.0), holding=["p2"])],
+        people=[PersonView(name="p", cell=(0, 1), pose=(0.0, 1.0))],
+        litter=[LitterView(name="p1", cell=(1, 0), known=True)],
+        recycled=[],
+    )
+    intentions = Intentions()
+    intentions.on_event(event("activated"))
+    intentions.on_event(event("boosted", goal=("p1", "p2")))
+    intentions.on_event(event("boosted", desire="patrol"))  # not the one pursued
+    text = render(info, snap, intentions.text)
+    lines = text.splitlines()
+    assert lines[1:3] == ["B * #", "@ 1 ."]
+    assert "1=robot1 holding 1" in lines[3]
+    assert lines[4] == "robot1: intends recycle (recycled p1) (recycled p2)"
+    intentions.on_event(event("dropped"))
+    assert intentions.text["robot1"] == "dropped recycle (deadline passed)"
