@@ -20,7 +20,8 @@ COPY shared ./shared
 COPY services ./services
 COPY domains ./domains
 RUN pip install --no-cache-dir --no-deps --no-build-isolation \
-      ./shared ./services/world ./services/monitor
+      ./shared ./services/world ./services/monitor \
+      ./services/planner ./services/scheduler ./services/executor
 
 ENV CBDI_DOMAINS=/opt/cbdi/domains
 # Services connect to the router through CBDI_CONNECT (set in docker-compose.yml).

@@ -28,10 +28,11 @@ def test_compose_file_is_valid() -> None:
     assert result.returncode == 0, result.stderr
 
 
-def test_compose_runs_router_world_and_an_agent_against_the_router() -> None:
+def test_compose_runs_router_world_and_a_bdi_agent_against_the_router() -> None:
     result = _config(REPO / "docker-compose.yml", "--services")
     assert result.returncode == 0, result.stderr
-    assert {"router", "monitor", "world", "robot1"} <= set(result.stdout.split())
+    services = {"router", "monitor", "world", "robot1-planner", "robot1-scheduler"}
+    assert services | {"robot1-executor"} <= set(result.stdout.split())
     full = _config(REPO / "docker-compose.yml").stdout
     assert "CBDI_CONNECT: tcp/router:7447" in full
     assert "BASE_IMAGE" in full
