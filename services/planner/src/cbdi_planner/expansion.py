@@ -27,6 +27,7 @@ class Node:
     running: tuple[tuple[int, int], ...]
     h: int
     helpful: frozenset[tuple[int, int]]
+    h_time: float = 0.0
 
     @property
     def makespan(self) -> float:
@@ -44,6 +45,13 @@ class Expander:
         self.generated = 0
         self.evaluated = 0
         self.inconsistent = 0
+        # Each action under the lowest fact of its start condition (-1: none), so
+        # `successors` looks only at actions whose condition can hold in a state.
+        self._by_fact: dict[int, list[int]] = {}
+        for action in task.actions:
+            pre = action.start.pre
+            low = (pre & -pre).bit_length() - 1
+            self._by_fact.setdefault(low, []).append(action.index)
         self._til_snaps = [
             Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils
         ]
@@ -54,7 +62,14 @@ class Expander:
             raise ValueError("a search root cannot have running actions")
         estimate = self.rpg.estimate(state)
         self.evaluated += 1
-        return Node(state, Timeline(epsilon=self.epsilon), (), estimate.value, estimate.helpful)
+        return Node(
+            state,
+            Timeline(epsilon=self.epsilon),
+            (),
+            estimate.value,
+            estimate.helpful,
+            estimate.duration,
+        )
 
     def evaluate(
         self, state: State, timeline: Timeline, running: tuple[tuple[int, int], ...]
@@ -62,7 +77,7 @@ class Expander:
         """Build a node, computing its heuristic value."""
         estimate = self.rpg.estimate(state)
         self.evaluated += 1
-        return Node(state, timeline, running, estimate.value, estimate.helpful)
+        return Node(state, timeline, running, estimate.value, estimate.helpful, estimate.duration)
 
     def successors(
         self, node: Node, helpful_only: bool = False
@@ -86,12 +101,11 @@ class Expander:
                 step = Step(TIL, state.til, self._til_snaps[state.til], -1, when, when)
                 yield from self._extend(new, timeline, step, node.running)
         facts = state.facts
-        for action in task.actions:
+        for index in self._candidates(node, helpful_only):
+            action = task.actions[index]
             if action.start.pre & ~facts:
                 continue
             kind = INST if action.end is None else START
-            if helpful_only and (kind, action.index) not in node.helpful:
-                continue
             new = apply_start(task, state, action)
             if new is None:
                 continue
@@ -106,6 +120,19 @@ class Expander:
             step = Step(START, action.index, action.start, -1, low, high)
             running = (*node.running, (action.index, len(timeline.steps)))
             yield from self._extend(new, timeline, step, tuple(sorted(running)))
+
+    def _candidates(self, node: Node, helpful_only: bool) -> list[int]:
+        """Return, in index order, the actions that may start in `node` (helpful ones)."""
+        if helpful_only:
+            return sorted(a for kind, a in node.helpful if kind in (START, INST))
+        by_fact, facts = self._by_fact, node.state.facts
+        out = list(by_fact.get(-1, ()))
+        while facts:
+            low = facts & -facts
+            out.extend(by_fact.get(low.bit_length() - 1, ()))
+            facts ^= low
+        out.sort()
+        return out
 
     def _extend(
         self, state: State, timeline: Timeline, step: Step, running: tuple[tuple[int, int], ...]

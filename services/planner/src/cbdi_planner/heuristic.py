@@ -25,10 +25,15 @@ INFINITE = 1 << 30
 
 @dataclass(frozen=True, slots=True)
 class Estimate:
-    """A heuristic value and the helpful happenings `(kind, action)` of a state."""
+    """A heuristic value and the helpful happenings `(kind, action)` of a state.
+
+    `duration` sums the durations of the relaxed plan's actions: a rough estimate of
+    the time still needed, which the anytime search weighs against makespan.
+    """
 
     value: int
     helpful: frozenset[tuple[int, int]]
+    duration: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +112,9 @@ class RelaxedPlanGraph:
         self.ended = n_facts + n_actions
         self.size = n_facts + 2 * n_actions + len(task.tils)
         self.ops: list[_Op] = []
+        # then[k]: the end op that start op k enables by itself (its other conditions
+        # are the start's conditions or effects), fired one layer later without counters.
+        then: dict[int, int] = {}
         for a in task.actions:
             start = a.start
             cond_add = 0
@@ -125,6 +133,8 @@ class RelaxedPlanGraph:
                 )
                 continue
             pre = start.pre | (a.inv & ~start.add)
+            if not (a.end.pre | a.inv) & ~(pre | start.add):
+                then[len(self.ops)] = len(self.ops) + 1
             self.ops.append(
                 _Op(
                     START,
@@ -150,84 +160,150 @@ class RelaxedPlanGraph:
             )
         for i, til in enumerate(task.tils):
             self.ops.append(_Op(TIL, i, (), _bits(til.add), (), ()))
-        self.users: list[list[int]] = [[] for _ in range(self.size)]
-        for k, op in enumerate(self.ops):
-            for f in op.pre:
-                self.users[f].append(k)
-        self.counts = [len(op.pre) for op in self.ops]
-        self.goal = _bits(task.goal)
+        self._index(then)
+
+    def _index(self, then: dict[int, int]) -> None:
+        """Flatten the operators into parallel lists for the inner loops of `estimate`."""
+        ops = self.ops
+        users: list[list[int]] = [[] for _ in range(self.size)]
+        adders: list[list[int]] = [[] for _ in range(self.size)]
+        chained = set(then.values())
+        for k, op in enumerate(ops):
+            for f in op.pre if k not in chained else ():
+                users[f].append(k)
+            for f in op.add:
+                adders[f].append(k)
+        self.users = [tuple(u) for u in users]
+        self.adders = [tuple(a) for a in adders]
+        self.counts = [len(op.pre) for op in ops]
+        self.op_pre = [op.pre for op in ops]
+        self.op_add = [op.add for op in ops]
+        self.op_num_pre = [op.num_pre for op in ops]
+        self.op_num_eff = [op.num_eff for op in ops]
+        self.free = [k for k, op in enumerate(ops) if not op.pre and op.kind != TIL]
+        self.til_ops = [k for k, op in enumerate(ops) if op.kind == TIL]
+        self.goal = _bits(self.task.goal)
+        self.op_duration = [self._duration(op) for op in ops]
+        self.then = [then.get(k, -1) for k in range(len(ops))]
+        self.chained_end = {ops[k].action: k for k in chained}
+
+    def _duration(self, op: _Op) -> float:
+        """Return the (least) duration an op stands for: its action's, for a start."""
+        if op.kind != START:
+            return 0.0
+        action = self.task.actions[op.action]
+        low, _ = action.duration_bounds(self.task.init_nums, 0.0)
+        return low if math.isfinite(low) else 0.0
 
     def estimate(self, state: State) -> Estimate:
         """Return the relaxed plan length and the helpful happenings of `state`."""
+        goals = list(self.goal) + [self.ended + a for a in state.open]
+        reached = self._explore(state, goals)
+        if reached is None:
+            return Estimate(INFINITE, frozenset())
+        level, achiever, op_level = reached
+        return self._extract(goals, level, achiever, op_level, state)
+
+    def _explore(
+        self, state: State, goals: list[int]
+    ) -> tuple[list[int], list[int], list[int]] | None:
+        """Build the graph layer by layer until every goal is reached (None: never).
+
+        Precondition counters make each layer cost only the operators its new facts
+        touch; an operator whose numeric condition cannot hold yet waits.
+        """
         level = [-1] * self.size
         achiever = [-1] * self.size
+        op_level = [-1] * len(self.ops)
         counts = self.counts[:]
+        users, op_add, op_num_pre, op_num_eff = (
+            self.users,
+            self.op_add,
+            self.op_num_pre,
+            self.op_num_eff,
+        )
         frontier = list(_bits(state.facts))
         frontier += [self.pending + a for a in state.open]
-        goals = list(self.goal) + [self.ended + a for a in state.open]
         for f in frontier:
             level[f] = 0
-        lo = list(state.nums)
-        hi = list(state.nums)
-        ready = [
-            k
-            for k, op in enumerate(self.ops)
-            if not op.pre and (op.kind != TIL or op.action >= state.til)
-        ]
+        is_goal = bytearray(self.size)
+        for g in goals:
+            is_goal[g] = 1
+        missing = sum(1 for g in set(goals) if level[g] < 0)
+        lo, hi = list(state.nums), list(state.nums)
+        ready = self.free + self.til_ops[state.til :]
+        extra = self._running_ends(state, level, counts, ready)
         waiting: list[int] = []
-        missing = sum(1 for g in goals if level[g] < 0)
-        op_level: dict[int, int] = {}
+        then = self.then
         depth = 0
         while missing:
             for f in frontier:
-                for k in self.users[f]:
+                for k in users[f]:
                     counts[k] -= 1
                     if counts[k] == 0:
                         ready.append(k)
-            layer, waiting = self._layer(waiting + ready, op_level, lo, hi)
+                for k in extra.get(f, ()) if extra else ():
+                    counts[k] -= 1
+                    if counts[k] == 0:
+                        ready.append(k)
+            held: list[int] = []
+            acting: list[int] = []  # ops with numeric effects, applied after the layer
+            fired, due, frontier = False, ready, []
             ready = []
-            if not layer:
-                return Estimate(INFINITE, frozenset())
-            frontier = []
-            for k in layer:
+            for k in waiting + due:
+                if op_level[k] >= 0:
+                    continue
+                if op_num_pre[k] and not all(_may_hold(c, lo, hi) for c in op_num_pre[k]):
+                    held.append(k)
+                    continue
                 op_level[k] = depth
-                op = self.ops[k]
-                for f in op.add:
+                fired = True
+                if then[k] >= 0:
+                    ready.append(then[k])
+                for f in op_add[k]:
                     if level[f] < 0:
                         level[f] = depth + 1
                         achiever[f] = k
                         frontier.append(f)
-                for effect in op.num_eff:
+                        missing -= is_goal[f]
+                if op_num_eff[k]:
+                    acting.append(k)
+            if not fired:
+                return None
+            for k in acting:
+                for effect in op_num_eff[k]:
                     _widen(effect, lo, hi)
-            missing = sum(1 for g in goals if level[g] < 0)
+            waiting = held
             depth += 1
-        return self._extract(goals, level, achiever, op_level, state)
+        return level, achiever, op_level
 
-    def _layer(
-        self, candidates: list[int], op_level: dict[int, int], lo: list[float], hi: list[float]
-    ) -> tuple[list[int], list[int]]:
-        """Split the ops whose facts are reached into this layer and those still waiting.
+    def _running_ends(
+        self, state: State, level: list[int], counts: list[int], ready: list[int]
+    ) -> dict[int, list[int]]:
+        """Set up the counters of the chained end ops of running actions.
 
-        An op waits while its numeric condition cannot hold yet; each op is taken once.
+        A chained end op is not in `users`; for an action the state has started, its
+        conditions may not hold any more, so they are counted here (`pending` holds).
         """
-        layer: list[int] = []
-        waiting: list[int] = []
-        for k in candidates:
-            if k in op_level:
+        extra: dict[int, list[int]] = {}
+        for a in state.open:
+            k = self.chained_end.get(a)
+            if k is None:
                 continue
-            op = self.ops[k]
-            if op.num_pre and not all(_may_hold(c, lo, hi) for c in op.num_pre):
-                waiting.append(k)
-            else:
-                layer.append(k)
-        return layer, waiting
+            need = [f for f in self.op_pre[k] if level[f] < 0]
+            counts[k] = len(need)
+            if not need:
+                ready.append(k)
+            for f in need:
+                extra.setdefault(f, []).append(k)
+        return extra
 
     def _extract(
         self,
         goals: list[int],
         level: list[int],
         achiever: list[int],
-        op_level: dict[int, int],
+        op_level: list[int],
         state: State,
     ) -> Estimate:
         """Extract a relaxed plan backwards (FF); helpful = applicable ops adding layer-1 goals."""
@@ -237,6 +313,7 @@ class RelaxedPlanGraph:
             buckets[level[g]].add(g)
         chosen: set[int] = set()
         done: set[int] = set()
+        op_pre, op_add = self.op_pre, self.op_add
         for depth in range(top, 0, -1):
             for g in buckets[depth]:
                 if g in done:
@@ -245,18 +322,18 @@ class RelaxedPlanGraph:
                 if k in chosen:
                     continue
                 chosen.add(k)
-                op = self.ops[k]
-                done.update(op.add)
-                for p in op.pre:
+                done.update(op_add[k])
+                for p in op_pre[k]:
                     if level[p] > 0 and p not in done:
                         buckets[level[p]].add(p)
-        first_goals = buckets[1] if top >= 1 else set()
         helpful = set()
-        for k, depth in op_level.items():
-            if depth == 0:
-                op = self.ops[k]
-                if op.kind == TIL and op.action != state.til:
-                    continue
-                if any(f in first_goals for f in op.add):
-                    helpful.add((op.kind, op.action))
-        return Estimate(len(chosen), frozenset(helpful))
+        if top >= 1:
+            ops = self.ops
+            for g in buckets[1]:
+                for k in self.adders[g]:
+                    if op_level[k] == 0:
+                        op = ops[k]
+                        if op.kind != TIL or op.action == state.til:
+                            helpful.add((op.kind, op.action))
+        duration = sum(self.op_duration[k] for k in chosen)
+        return Estimate(len(chosen), frozenset(helpful), duration)

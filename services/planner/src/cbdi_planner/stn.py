@@ -57,6 +57,26 @@ def interferes(a: Snap, b: Snap) -> bool:
     )
 
 
+def _interfering(steps: tuple[Step, ...], b: Snap) -> list[int]:
+    """Return the indexes of the steps that interfere with `b` (`interferes`, inlined)."""
+    reads, writes, add, dele = b.reads, b.writes, b.add, b.dele
+    num_reads, num_writes = b.num_reads, b.num_writes
+    num_any = num_reads | num_writes
+    out = []
+    for k, old in enumerate(steps):
+        a = old.snap
+        if (
+            (a.writes & reads)
+            or (a.reads & writes)
+            or (a.add & dele)
+            or (a.dele & add)
+            or (a.num_writes & num_any)
+            or (a.num_reads & num_writes)
+        ):
+            out.append(k)
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class Timeline:
     """Steps, their incoming ordering edges and their earliest consistent times."""
@@ -65,13 +85,12 @@ class Timeline:
     edges: tuple[tuple[tuple[int, float], ...], ...] = ()
     times: tuple[float, ...] = ()
     epsilon: float = 0.001
+    span: float = 0.0
 
     @property
     def makespan(self) -> float:
         """Return the latest time of an action step (a lower bound for any extension)."""
-        return max(
-            (t for t, s in zip(self.times, self.steps, strict=True) if s.kind != TIL), default=0.0
-        )
+        return self.span
 
     def extend(self, step: Step, future: Future | None = None) -> Timeline | None:
         """Return the timeline with `step` appended, or None if it is inconsistent.
@@ -80,7 +99,7 @@ class Timeline:
         actions running after it, the timed literals not yet happened).
         """
         eps = self.epsilon
-        incoming = [(i, eps) for i, old in enumerate(self.steps) if interferes(old.snap, step.snap)]
+        incoming = [(i, eps) for i in _interfering(self.steps, step.snap)]
         if step.kind == END:
             incoming.append((step.partner, step.low))
         edges = (*self.edges, tuple(incoming))
@@ -93,7 +112,8 @@ class Timeline:
             return None
         if future is not None and not _before_deadlines(steps, times, future, eps):
             return None
-        return Timeline(steps, edges, tuple(times), eps)
+        span = max((t for t, s in zip(times, steps, strict=True) if s.kind != TIL), default=0.0)
+        return Timeline(steps, edges, tuple(times), eps, span)
 
     @staticmethod
     def _base(step: Step, incoming: list[tuple[int, float]], times: list[float]) -> float:
@@ -127,9 +147,7 @@ def _waits(steps: tuple[Step, ...], future: Future) -> tuple[_Wait, ...]:
         high = steps[start].high
         if high == math.inf:
             continue
-        after = tuple(
-            k for k, old in enumerate(steps) if k != start and interferes(old.snap, end_snap)
-        )
+        after = tuple(k for k in _interfering(steps, end_snap) if k != start)
         if after:
             out.append((start, high, after))
     return tuple(out)
