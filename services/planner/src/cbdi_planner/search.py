@@ -2,7 +2,8 @@
 
 `auto` runs enforced hill-climbing with helpful actions first (fast, incomplete) and
 falls back to complete best-first search if it gets stuck, as FF and JavaFF do. The
-anytime mode then keeps searching for plans with a shorter makespan.
+anytime mode then keeps searching for plans with a shorter makespan, by weighted A* on
+makespan with branch-and-bound pruning.
 """
 
 from __future__ import annotations
@@ -10,13 +11,14 @@ from __future__ import annotations
 import heapq
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 from cbdi_planner.errors import SearchTimeout
 from cbdi_planner.expansion import Expander, Node
 from cbdi_planner.plan import Plan, plan_from_timeline
 from cbdi_planner.state import State, initial_state, is_goal
+from cbdi_planner.stn import END, TIL, Timeline
 from cbdi_planner.task import Task
 
 __all__ = ["Budget", "SearchResult", "SearchStats", "search"]
@@ -111,37 +113,128 @@ def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | No
     return current
 
 
-def best_first(ex: Expander, root: Node, clock: _Clock, bound: float | None = None) -> Node | None:
+def best_first(ex: Expander, root: Node, clock: _Clock) -> Node | None:
     """Run greedy best-first search on h (ties: fewer steps); None if exhausted.
 
-    With `bound`, nodes whose partial plan already reaches that makespan are pruned,
-    which turns the search into the improving phase of the anytime mode.
+    Evaluation is deferred: a successor waits in the open list with its parent's h and
+    is evaluated only when taken out, so the heuristic runs once per expanded node
+    rather than once per generated one. Successors reached by a helpful happening also
+    go to a second open list, taken in turn with the first and exclusively for a while
+    after h improves (Fast Downward's boosted dual queue): helpful actions lead the
+    way, the full list keeps the search complete.
     """
-    if is_goal(ex.task, root.state):
-        return root
-    counter = 0
-    frontier = [(root.h, 0, counter, root)]
+    lists: tuple[list[_Lazy], list[_Lazy]] = ([(root.h, 0, 0, root, None)], [])
+    closed: set[object] = set()
+    counter, turn, boost, best_h = 0, 0, 0, root.h
+    while lists[0] or lists[1]:
+        turn = _next_list(lists, turn, boost)
+        boost = max(0, boost - 1)
+        node = _take(ex, heapq.heappop(lists[turn]), closed)
+        if node is None:
+            continue
+        closed.add(node.state.key())
+        if is_goal(ex.task, node.state):
+            return node
+        if node.h < best_h:
+            best_h, boost = node.h, _BOOST
+        clock.tick()
+        for succ in ex.successors(node):
+            if succ[0].key() in closed:
+                continue
+            counter += 1
+            entry = (node.h, len(succ[1].steps), counter, node, succ)
+            heapq.heappush(lists[0], entry)
+            if _helpful_step(node, succ[1]):
+                heapq.heappush(lists[1], entry)
+    return None
+
+
+_Successor = tuple[State, Timeline, tuple[tuple[int, int], ...]]
+# (priority, steps, tie-break, node or parent, successor to evaluate or None)
+_Lazy = tuple[float, int, int, Node, _Successor | None]
+_Entry = tuple[float, int, int, Node]
+_BOOST = 1000  # expansions on the helpful list alone after h improves
+
+
+def _take(ex: Expander, entry: _Lazy, closed: set[object]) -> Node | None:
+    """Return the node of an open-list entry, evaluating it now (None: closed or dead)."""
+    parent, succ = entry[3], entry[4]
+    if succ is None:
+        return None if parent.state.key() in closed else parent
+    state, timeline, running = succ
+    if state.key() in closed:
+        return None
+    node = ex.evaluate(state, timeline, running)
+    return None if ex.dead(node) else node
+
+
+def _next_list(lists: tuple[list[_Lazy], list[_Lazy]], turn: int, boost: int) -> int:
+    """Alternate between the open lists, staying on the helpful one while boosted."""
+    if not lists[1]:
+        return 0
+    if boost > 0 or not lists[0]:
+        return 1
+    return turn ^ 1
+
+
+def _helpful_step(parent: Node, timeline: Timeline) -> bool:
+    """Tell whether the last step of `timeline` is helpful in `parent` (ends always are)."""
+    step = timeline.steps[-1]
+    return step.kind in (END, TIL) or (step.kind, step.action) in parent.helpful
+
+
+def improving(
+    ex: Expander, root: Node, clock: _Clock, bound: float, weights: tuple[float, ...]
+) -> Iterator[Node]:
+    """Yield goal nodes of ever shorter makespan, below `bound` (anytime weighted A*).
+
+    A node's priority is its makespan plus a weight times the relaxed plan's duration.
+    Each goal lowers the bound, which prunes every node whose partial plan is already
+    as long (branch and bound), and moves to the next, smaller weight: the open list
+    is reordered rather than thrown away, so no search effort is lost.
+    """
+    weight, later = weights[0], list(weights[1:])
+    frontier: list[_Entry] = [(0.0, 0, 0, root)]
     best_span: dict[object, float] = {root.state.key(): 0.0}
+    counter = 0
     while frontier:
-        _, _, _, node = heapq.heappop(frontier)
+        node = heapq.heappop(frontier)[3]
+        if node.makespan >= bound - 1e-9 or best_span.get(node.state.key(), 0.0) < node.makespan:
+            continue
         clock.tick()
         for state, timeline, running in ex.successors(node):
             span = timeline.makespan
-            if bound is not None and span >= bound - 1e-9:
+            if span >= bound - 1e-9:
                 continue
             key = state.key()
             known = best_span.get(key)
-            if known is not None and (bound is None or known <= span + 1e-9):
+            if known is not None and known <= span + 1e-9:
                 continue
             best_span[key] = span
             child = ex.evaluate(state, timeline, running)
             if ex.dead(child):
                 continue
             if is_goal(ex.task, state):
-                return child
+                bound = span
+                yield child
+                if later:
+                    weight = later.pop(0)
+                    frontier = _reweigh(frontier, weight, bound)
+                continue
             counter += 1
-            heapq.heappush(frontier, (child.h, len(timeline.steps), counter, child))
-    return None
+            f = span + weight * child.h_time
+            heapq.heappush(frontier, (f, child.h, counter, child))
+
+
+def _reweigh(frontier: list[_Entry], weight: float, bound: float) -> list[_Entry]:
+    """Return the open list under a new weight, without nodes the bound prunes."""
+    out = [
+        (n.makespan + weight * n.h_time, h, c, n)
+        for _, h, c, n in frontier
+        if n.makespan < bound - 1e-9
+    ]
+    heapq.heapify(out)
+    return out
 
 
 def search(
@@ -218,8 +311,10 @@ def _improve(
     result: SearchResult,
     on_plan: Callable[[Plan], None] | None,
 ) -> None:
-    """Search again and again, each time only for plans shorter than the best so far."""
-    while result.plan is not None:
-        goal = best_first(ex, root, clock, bound=result.plan.makespan)
-        if goal is None or not _record(ex.task, goal, result, clock, on_plan):
-            return
+    """Search for plans shorter than the best so far until the budget runs out."""
+    assert result.plan is not None
+    for goal in improving(ex, root, clock, result.plan.makespan, WEIGHTS):
+        _record(ex.task, goal, result, clock, on_plan)
+
+
+WEIGHTS = (2.0, 1.0)
