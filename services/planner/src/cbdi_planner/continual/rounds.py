@@ -91,6 +91,7 @@ class SearchSpace:
         self.closed: set[object] = set()
         self.counter = 0
         self.expanded = 0
+        self.best = self.root  # the round's best state so far
         self._push(self.root)
 
     def _push(self, node: Node) -> None:
@@ -118,8 +119,8 @@ class SearchSpace:
     def search_round(self, bound: RoundBound) -> Round:
         """Run Algorithm 1 from the root until the goal, a bound, or an empty open list."""
         started, expanded = self.now(), 0
-        best = self.root  # line 1
-        if self.expander.dead(best):
+        self.best = self.root  # line 1
+        if self.expander.dead(self.root):
             self._clear_open()
         while self._has_open():  # line 4
             node = self._pop()  # line 5
@@ -127,20 +128,26 @@ class SearchSpace:
             if key in self.closed:
                 continue
             self.closed.add(key)
-            if not node.running and node.h < best.h:  # lines 6-7
-                best = node
+            self._consider(node)  # lines 6-7
             if is_goal(self.task, node.state):  # line 8
                 return self._done("goal", node, expanded, started)
-            if self._bound_hit(bound, best, expanded, started):  # lines 9-11
+            if self._bound_hit(bound, self.best, expanded, started):  # lines 9-11
                 # `node` is not expanded yet: it stays open for the next round.
                 self.closed.discard(key)
                 self._unpop(node)
-                return self._done("best", best, expanded, started)
+                return self._done("best", self.best, expanded, started)
             expanded += 1
             self._expand(node)  # lines 12-14
-        if best is not self.root:
-            return self._done("best", best, expanded, started)
+        if self.best is not self.root:
+            return self._done("best", self.best, expanded, started)
         return self._done("exhausted", None, expanded, started)  # line 16
+
+    def _consider(self, node: Node) -> None:
+        """Lines 6-7: the best state has the lowest h and no running action. Successors
+        count as soon as they are evaluated, so a round cut short by its interval still
+        hands out what its last expansion found."""
+        if not node.running and node.h < self.best.h:
+            self.best = node
 
     def _bound_hit(self, bound: RoundBound, best: Node, expanded: int, started: float) -> bool:
         if bound.seconds is not None and self.now() - started >= bound.seconds:
@@ -159,6 +166,7 @@ class SearchSpace:
             child = self.expander.evaluate(state, timeline, running)
             if self.expander.dead(child):
                 continue
+            self._consider(child)
             if greedy and child.h < self.current.h:
                 # Enforced hill-climbing: climb to the better node, forget the plateau.
                 self.current = child
