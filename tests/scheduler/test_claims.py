@@ -127,6 +127,7 @@ def test_losing_part_of_an_active_goal_restarts_the_search_without_it() -> None:
     starts = [c for c in late.commands if c.kind == "start_search"]
     assert starts and starts[0].reason == "goal reduced"
     assert starts[0].desire is not None and starts[0].desire.goal == (fact("recycled", "p2"),)
+    assert [(e.desire, e.event) for e in late.events] == [("recycle", "reduced")]
 
 
 def test_a_robot_holding_an_item_owns_it_whatever_else_was_claimed() -> None:

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import asyncio
 import string
-from collections.abc import Mapping, Sequence
+from collections.abc import AsyncIterator, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TextIO
+from typing import Any, TextIO
 
 import uvloop
 
@@ -24,7 +24,7 @@ from cbdi.runtime import ServiceSettings, load_config
 from cbdi.wire.agent import DesireEvent
 from cbdi.wire.world import WorldInfo, WorldInfoRequest, WorldSnapshot
 
-__all__ = ["Intentions", "follow_text", "main", "render"]
+__all__ = ["Intentions", "follow_text", "main", "render", "text_view"]
 
 _AGENT_MARKS = string.digits[1:] + string.ascii_uppercase
 
@@ -67,19 +67,13 @@ class Intentions:
     def on_event(self, e: DesireEvent) -> None:
         goal = " ".join("(" + " ".join(g) + ")" for g in e.goal)
         pursued = self.current.get(e.agent) == e.desire
-        if e.event == "activated" or (e.event == "boosted" and pursued):
+        if e.event == "activated" or (e.event in ("boosted", "reduced") and pursued):
             self.current[e.agent] = e.desire
             self.text[e.agent] = f"intends {e.desire} {goal}"
         elif e.event in ("achieved", "dropped") and pursued:
             del self.current[e.agent]
             why = f" ({e.reason})" if e.reason else ""
             self.text[e.agent] = f"{e.event} {e.desire}{why}"
-
-
-async def _follow_intentions(bus: Bus, intentions: Intentions) -> None:
-    events = messages(bus, keys.agent_stream("*", "scheduler", "desires"), DesireEvent, LogSink())
-    async for _, event in events:
-        intentions.on_event(event)
 
 
 async def world_info(bus: Bus, timeout: float = 10.0) -> WorldInfo:
@@ -92,14 +86,34 @@ async def world_info(bus: Bus, timeout: float = 10.0) -> WorldInfo:
                 await asyncio.sleep(0.2)
 
 
-async def follow_text(bus: Bus, out: TextIO, frames: int = 0) -> None:
-    """Print a frame for every world snapshot (clearing the screen on a terminal).
-
-    With `frames` > 0, stop after that many frames.
-    """
+def text_view(bus: Bus, out: TextIO, frames: int = 0) -> Coroutine[Any, Any, None]:
+    """Subscribe now (so nothing from here on is missed) and return the coroutine that
+    prints a frame for every world snapshot (clearing the screen on a terminal), with what
+    each agent intends. With `frames` > 0 it stops after that many frames."""
     snaps = messages(bus, keys.world_stream("snapshot"), WorldSnapshot, LogSink())
+    events = messages(bus, keys.agent_stream("*", "scheduler", "desires"), DesireEvent, LogSink())
+    return _draw(bus, snaps, events, out, frames)
+
+
+async def follow_text(bus: Bus, out: TextIO, frames: int = 0) -> None:
+    """Print a frame for every world snapshot from now on (see `text_view`)."""
+    await text_view(bus, out, frames)
+
+
+async def _draw(
+    bus: Bus,
+    snaps: AsyncIterator[tuple[str, WorldSnapshot]],
+    events: AsyncIterator[tuple[str, DesireEvent]],
+    out: TextIO,
+    frames: int,
+) -> None:
     intentions = Intentions()
-    follower = asyncio.create_task(_follow_intentions(bus, intentions))
+
+    async def follow() -> None:
+        async for _, event in events:
+            intentions.on_event(event)
+
+    follower = asyncio.create_task(follow())
     try:
         info = await world_info(bus)
         clear = "\x1b[2J\x1b[H" if out.isatty() else ""

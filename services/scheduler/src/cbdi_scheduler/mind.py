@@ -195,6 +195,8 @@ class Mind:
             owners = sorted({f"{' '.join(a)} by {claims.foreign(a)}" for a in left})
             if mine:
                 self.desires[name] = replace(desire, goal=tuple(mine))
+                reason = "claimed by others: " + ", ".join(owners)
+                out.events.append(self.event(self.desires[name], "reduced", reason))
                 continue
             del self.desires[name]
             reason = "claimed by others: " + ", ".join(owners)

@@ -224,6 +224,10 @@ async def _start_all(
     tg.create_task(live.follow(bus))
     # Subscribed before any agent starts, so the tally misses none of their messages.
     tg.create_task(_count(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
+    if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
+        from cbdi.view import text_view
+
+        tg.create_task(text_view(bus, sys.stdout))
     await _wait_alive(live, [router], opts)
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1
@@ -294,10 +298,6 @@ async def _await_end(
         end(f"failed: {proc.spec.service} exited {proc.exit_codes[-1]} and was not restarted")
 
     watchers = [tg.create_task(finished())] + [tg.create_task(failure(p)) for p in procs]
-    if opts.view == "text":
-        from cbdi.view import follow_text
-
-        watchers.append(tg.create_task(follow_text(bus, sys.stdout)))
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, end, "interrupted")

@@ -110,7 +110,8 @@ class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
 
 
 class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
-    """A desire was added, boosted, activated, achieved or dropped (with the reason)."""
+    """A desire was added, boosted, reduced (goal atoms claimed by other agents), activated,
+    achieved or dropped (with the reason)."""
 
     agent: str
     desire: str
