@@ -161,6 +161,9 @@ def _report(summary: RunSummary, as_json: bool) -> None:
     print(line, file=sys.stderr)
     for name, counts in summary.stats.get("agents", {}).items():
         text = " ".join(f"{k}={v}" for k, v in counts.items())
+        acts = summary.actions.get(name)
+        if acts:
+            text += f" actions={acts['actions']} first_action_at={acts['first_action']}"
         print(f"  {name}: {text}", file=sys.stderr)
     planners = summary.planner.get("agents", {})
     rows = [*planners.items(), ("total", summary.planner.get("total", {}))] if planners else []

@@ -35,7 +35,7 @@ from cbdi.launcher.process import (
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished
-from cbdi.wire.world import StatsRequest, WorldStats
+from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
 
 __all__ = ["LaunchOptions", "RunSummary", "launch"]
 
@@ -67,6 +67,8 @@ class RunSummary:
     restarts: dict[str, int] = field(default_factory=dict)
     exit_codes: dict[str, list[int]] = field(default_factory=dict)
     planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
+    # Per agent: `actions` it asked the world for and the simulated time of the first.
+    actions: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -224,6 +226,10 @@ async def _start_all(
     tg.create_task(live.follow(bus))
     # Subscribed before any agent starts, so the tally misses none of their messages.
     tg.create_task(_count(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
+    act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
+    tg.create_task(
+        _actions(inputs(bus, [keys.CLOCK, act], (Tick, ActionRequest), LogSink()), summary)
+    )
     if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
         from cbdi.view import text_view
 
@@ -244,6 +250,19 @@ async def _count(stream: AsyncIterator[tuple[str, Message]], planners: tally.Pla
     """Count the planners' plans, replans, repairs and rounds as they are published."""
     async for key, msg in stream:
         planners.observe(key, msg)
+
+
+async def _actions(stream: AsyncIterator[tuple[str, Message]], summary: RunSummary) -> None:
+    """Count each agent's action requests and note the simulated time of its first."""
+    now = 0.0
+    async for _, msg in stream:
+        if isinstance(msg, Tick):
+            now = msg.time
+        elif isinstance(msg, ActionRequest):
+            agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
+            agent["actions"] += 1
+            if agent["first_action"] is None:
+                agent["first_action"] = now
 
 
 async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: LaunchOptions) -> None:
