@@ -133,14 +133,6 @@ def _at(error: PddlError, kind: type[PddlError], file: str, line: int, column: i
             id="unsupported-requirement",
         ),
         pytest.param(
-            DOMAIN.replace("(at start (p ?x))", "(at start (or (p ?x) (q ?x ?x)))"),
-            UnsupportedFeature,
-            8,
-            31,
-            "'or'",
-            id="unsupported-or",
-        ),
-        pytest.param(
             DOMAIN.replace("(at start (p ?x))", "(p ?x)"),
             PddlSyntaxError,
             8,

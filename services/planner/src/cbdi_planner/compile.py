@@ -1,18 +1,23 @@
 """Compile bound action instances into bitmask snap actions, with statics compiled away.
 
 Static facts and static numeric functions are decided here, once: a condition on them
-is either dropped (true) or kills the instance (false). What remains refers only to
-facts and variables that can change.
+is either dropped (true) or removes its disjunct (false). What remains refers only to
+facts and variables that can change. A condition with `or`, `imply` or `exists` is
+turned into disjunctive normal form (dnf.py) and the instance into one ground action
+per disjunct, all with the same name: a plan names the action, not the disjunct.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass, field
+from collections.abc import Iterator
 
+from cbdi_planner.dnf import Clause, Conj, TooManyDisjuncts, conjoin, disjoin
+from cbdi_planner.effects import Body, Guard, build_snap, conditional
 from cbdi_planner.errors import UnsupportedFeature
 from cbdi_planner.pddl.ast import (
+    ALL,
     END,
     INST,
     START,
@@ -21,6 +26,7 @@ from cbdi_planner.pddl.ast import (
     Cond,
     DurationVar,
     Effect,
+    ExistsCond,
     Expr,
     FHead,
     ForallCond,
@@ -28,43 +34,31 @@ from cbdi_planner.pddl.ast import (
     Lit,
     Num,
     NumEffect,
+    OrCond,
+    Param,
     TimedLiteral,
     WhenEffect,
 )
 from cbdi_planner.reachability import GAtom, Instance, Objects
 from cbdi_planner.task import (
+    INTERNAL,
     CondEffect,
     GroundAction,
     NExpr,
     NumAssign,
     NumCond,
-    Snap,
     eval_expr,
-    expr_vars,
 )
 
 __all__ = ["Compiler", "Impossible"]
 
 Env = dict[str, str]
+_INSTANT = (None, 0, 0, (), (), None)  # no end, invariant or duration
+_WORDS = {START: "at start", ALL: "over all", END: "at end", INST: "at once"}
 
 
 class Impossible(Exception):
-    """Raised inside compilation when a static condition is false."""
-
-
-@dataclass(slots=True)
-class _Conj:
-    pre: int = 0
-    neg: int = 0
-    num: list[NumCond] = field(default_factory=list)
-
-
-@dataclass(slots=True)
-class _Effs:
-    add: int = 0
-    dele: int = 0
-    num: list[NumAssign] = field(default_factory=list)
-    cond: list[CondEffect] = field(default_factory=list)
+    """Raised when an expression needs a `?duration` that is not fixed."""
 
 
 class Compiler:
@@ -89,6 +83,19 @@ class Compiler:
         self.file = file
         self.fluent_preds = {a[0] for a in fluent_atoms}
 
+    def new_fact(self, name: str) -> int:
+        """Add a fact of the planner's own (`name` starts with INTERNAL); return its bit."""
+        self.fact_index[(name,)] = len(self.facts)
+        self.facts.append(f"({name})")
+        return 1 << (len(self.facts) - 1)
+
+    def bindings(self, params: tuple[Param, ...], env: Env) -> Iterator[Env]:
+        """Yield `env` extended by every typed assignment of `params`."""
+        for values in itertools.product(*(self.objects.candidates(p) for p in params)):
+            inner = dict(env)
+            inner.update(zip((p.name for p in params), values, strict=True))
+            yield inner
+
     # -- expressions ----------------------------------------------------------
     def expr(self, expr: Expr, env: Env, duration: float | None) -> NExpr:
         """Compile an expression, folding statics and a known ?duration into constants."""
@@ -102,161 +109,252 @@ class Compiler:
             key = (expr.name, *(env.get(a, a) for a in expr.args))
             if expr.name in self.static_functions:
                 return ("c", self.init_numeric.get(key, math.nan))
-            if key not in self.var_index:
-                self.var_index[key] = len(self.var_index)
-            return ("v", self.var_index[key])
+            return ("v", self.var(key))
         assert isinstance(expr, BinOp)
         lhs, rhs = self.expr(expr.lhs, env, duration), self.expr(expr.rhs, env, duration)
         if lhs[0] == "c" and rhs[0] == "c":
             return ("c", eval_expr((expr.op, lhs, rhs), ()))
         return (expr.op, lhs, rhs)
 
-    # -- conditions -----------------------------------------------------------
-    def conds(
-        self, conds: tuple[Cond, ...], env: Env, out: dict[str, _Conj], duration: float | None
-    ) -> None:
-        """Add conditions to `out` by time; raise Impossible if a static one is false."""
-        for cond in conds:
-            if isinstance(cond, ForallCond):
-                for values in itertools.product(*(self.objects.candidates(p) for p in cond.params)):
-                    inner = dict(env)
-                    inner.update(zip((p.name for p in cond.params), values, strict=True))
-                    self.conds(cond.body, inner, out, duration)
-            elif isinstance(cond, Compare):
-                check = NumCond(
-                    cond.op, self.expr(cond.lhs, env, duration), self.expr(cond.rhs, env, duration)
-                )
-                if check.lhs[0] == "c" and check.rhs[0] == "c":
-                    if not check.holds(()):
-                        raise Impossible(cond)
-                else:
-                    out.setdefault(cond.time, _Conj()).num.append(check)
-            else:
-                self._literal(cond, env, out.setdefault(cond.time, _Conj()))
-
-    def _literal(self, lit: Lit, env: Env, conj: _Conj) -> None:
-        atom = (lit.atom.predicate, *(env.get(a, a) for a in lit.atom.args))
-        if atom[0] == "=":
-            if (atom[1] == atom[2]) != lit.positive:
-                raise Impossible(lit)
-            return
-        if atom[0] not in self.fluent_preds:
-            if (atom in self.static_atoms) != lit.positive:
-                raise Impossible(lit)
-            return
-        index = self.fact_index.get(atom)
-        if index is None:
-            if lit.positive:
-                raise Impossible(lit)  # never reachable
-            return
-        if lit.positive:
-            conj.pre |= 1 << index
-        else:
-            conj.neg |= 1 << index
-
-    # -- effects --------------------------------------------------------------
-    def effects(
-        self, effects: tuple[Effect, ...], env: Env, out: dict[str, _Effs], duration: float | None
-    ) -> None:
-        """Add effects to `out` by time."""
-        for effect in effects:
-            if isinstance(effect, ForallEffect):
-                for values in itertools.product(
-                    *(self.objects.candidates(p) for p in effect.params)
-                ):
-                    inner = dict(env)
-                    inner.update(zip((p.name for p in effect.params), values, strict=True))
-                    self.effects(effect.body, inner, out, duration)
-            elif isinstance(effect, WhenEffect):
-                self._when(effect, env, out, duration)
-            elif isinstance(effect, NumEffect):
-                key = NumAssign(
-                    effect.op, self._var(effect.head, env), self.expr(effect.expr, env, duration)
-                )
-                out.setdefault(effect.time, _Effs()).num.append(key)
-            else:
-                self._add_del(effect, env, out.setdefault(effect.time, _Effs()))
-
-    def _var(self, head: FHead, env: Env) -> int:
-        key = (head.name, *(env.get(a, a) for a in head.args))
+    def var(self, key: tuple[str, ...]) -> int:
+        """Return the index of a numeric variable, numbering it on first use."""
         if key not in self.var_index:
             self.var_index[key] = len(self.var_index)
         return self.var_index[key]
 
-    def _add_del(self, effect: TimedLiteral, env: Env, effs: _Effs) -> None:
+    # -- conditions -----------------------------------------------------------
+    def condition(self, conds: tuple[Cond, ...], env: Env, duration: float | None) -> list[Clause]:
+        """Return the disjuncts of a condition; [] when it can never hold.
+
+        `forall` conjoins over the objects and `exists` disjoins over them. A disjunct
+        with a false static literal disappears; a true static literal drops out.
+        """
+        base: Clause = {}
+        parts: list[tuple[OrCond | ExistsCond, list[Clause]]] = []
+        if not self._gather(conds, env, duration, base, parts):
+            return []
+        clauses = [] if any(c.pre & c.neg for c in base.values()) else [base]
+        for cond, alternatives in parts:
+            try:
+                clauses = conjoin(clauses, alternatives)
+            except TooManyDisjuncts as exc:
+                exc.line, exc.column = exc.line or cond.line, exc.column or cond.column
+                raise
+        return clauses
+
+    def _gather(
+        self,
+        conds: tuple[Cond, ...],
+        env: Env,
+        duration: float | None,
+        base: Clause,
+        parts: list[tuple[OrCond | ExistsCond, list[Clause]]],
+    ) -> bool:
+        """Add the plain literals of a conjunction to `base` (in place, the common case)
+        and its disjunctions to `parts`; return False if it can never hold."""
+        for cond in conds:
+            if isinstance(cond, ForallCond):
+                for inner in self.bindings(cond.params, env):
+                    if not self._gather(cond.body, inner, duration, base, parts):
+                        return False
+            elif isinstance(cond, OrCond | ExistsCond):
+                try:
+                    alternatives = self._disjunction(cond, env, duration)
+                except TooManyDisjuncts as exc:
+                    exc.line, exc.column = exc.line or cond.line, exc.column or cond.column
+                    raise
+                if not alternatives:
+                    return False
+                parts.append((cond, alternatives))
+            elif not self._leaf(cond, env, duration, base):
+                return False
+        return True
+
+    def _disjunction(
+        self, cond: OrCond | ExistsCond, env: Env, duration: float | None
+    ) -> list[Clause]:
+        if isinstance(cond, OrCond):
+            return disjoin(self.condition(part, env, duration) for part in cond.parts)
+        return disjoin(
+            self.condition(cond.body, inner, duration) for inner in self.bindings(cond.params, env)
+        )
+
+    def _leaf(self, cond: Lit | Compare, env: Env, duration: float | None, base: Clause) -> bool:
+        """Conjoin a literal or comparison to `base`; return False if it is false."""
+        if isinstance(cond, Compare):
+            check = NumCond(
+                cond.op, self.expr(cond.lhs, env, duration), self.expr(cond.rhs, env, duration)
+            )
+            if check.lhs[0] == "c" and check.rhs[0] == "c":
+                return check.holds(())
+            base.setdefault(cond.time, Conj()).num.append(check)
+            return True
+        atom = (cond.atom.predicate, *(env.get(a, a) for a in cond.atom.args))
+        if atom[0] == "=":
+            return (atom[1] == atom[2]) == cond.positive
+        if atom[0] not in self.fluent_preds:
+            return (atom in self.static_atoms) == cond.positive
+        index = self.fact_index.get(atom)
+        if index is None:  # never reachable: never true
+            return not cond.positive
+        conj = base.setdefault(cond.time, Conj())
+        if cond.positive:
+            conj.pre |= 1 << index
+        else:
+            conj.neg |= 1 << index
+        return True
+
+    # -- effects --------------------------------------------------------------
+    def effects(
+        self, effects: tuple[Effect, ...], env: Env, out: Body, duration: float | None
+    ) -> None:
+        """Add effects to `out` by time."""
+        for effect in effects:
+            if isinstance(effect, ForallEffect):
+                for inner in self.bindings(effect.params, env):
+                    self.effects(effect.body, inner, out, duration)
+            elif isinstance(effect, WhenEffect):
+                self._when(effect, env, out, duration)
+            elif isinstance(effect, NumEffect):
+                key = (effect.head.name, *(env.get(a, a) for a in effect.head.args))
+                assign = NumAssign(effect.op, self.var(key), self.expr(effect.expr, env, duration))
+                out.slot(effect.time).num.append(assign)
+            else:
+                self._add_del(effect, env, out)
+
+    def _add_del(self, effect: TimedLiteral, env: Env, out: Body) -> None:
         atom = (effect.atom.predicate, *(env.get(a, a) for a in effect.atom.args))
         index = self.fact_index.get(atom)
         if index is None:
             return  # deleting an atom that is never true changes nothing
         if effect.positive:
-            effs.add |= 1 << index
+            out.slot(effect.time).add |= 1 << index
         else:
-            effs.dele |= 1 << index
+            out.slot(effect.time).dele |= 1 << index
 
-    def _when(
-        self, effect: WhenEffect, env: Env, out: dict[str, _Effs], duration: float | None
-    ) -> None:
-        conds: dict[str, _Conj] = {}
+    def _when(self, effect: WhenEffect, env: Env, out: Body, duration: float | None) -> None:
+        """Add a conditional effect: at its own time, or as a guard (start condition,
+        end effect)."""
         try:
-            self.conds(effect.condition, env, conds, duration)
-        except Impossible:
+            clauses = self.condition(effect.condition, env, duration)
+        except TooManyDisjuncts as exc:
+            if not exc.line:
+                exc.line, exc.column = effect.line, effect.column
+            raise
+        if not clauses:
             return
-        body: dict[str, _Effs] = {}
+        body = Body()
         self.effects(effect.body, env, body, duration)
-        for time, effs in body.items():
-            if any(t != time for t in conds):
-                raise UnsupportedFeature(
-                    "a conditional effect whose condition and effect are at different times",
-                    file=self.file,
-                )
-            conj = conds.get(time, _Conj())
-            target = out.setdefault(time, _Effs())
-            if not (conj.pre or conj.neg or conj.num):
-                target.add |= effs.add
-                target.dele |= effs.dele
-                target.num.extend(effs.num)
+        if body.guards:
+            raise UnsupportedFeature(
+                "a conditional effect with an at-start condition inside another one",
+                file=self.file,
+                line=effect.line,
+                column=effect.column,
+            )
+        times = {t for clause in clauses for t, conj in clause.items() if not conj.empty()}
+        for time, effs in body.times.items():
+            if times <= {time}:
+                out.slot(time).cond.extend(conditional(clauses, time, effs))
+            elif time == END and times <= {START, END}:
+                out.guards.append(Guard(clauses, effs))
             else:
-                target.cond.append(
-                    CondEffect(
-                        conj.pre, conj.neg, tuple(conj.num), effs.add, effs.dele, tuple(effs.num)
-                    )
+                other = " and ".join(_WORDS[t] for t in sorted(times - {time}))
+                raise UnsupportedFeature(
+                    f"a conditional effect {_WORDS[time]} whose condition is checked {other} "
+                    "(across times only a condition at start, or at start and at end, "
+                    "on an effect at end is supported)",
+                    file=self.file,
+                    line=effect.line,
+                    column=effect.column,
                 )
 
     # -- actions --------------------------------------------------------------
-    def action(self, inst: Instance, index: int) -> GroundAction | None:
-        """Compile an instance; return None when a static condition rules it out."""
+    def actions(self, inst: Instance, index: int) -> list[GroundAction]:
+        """Compile an instance into ground actions numbered from `index`, one per disjunct
+        of its condition; [] when no disjunct can hold.
+
+        A durative action split in several keeps one copy running at a time, through a
+        fact of its own, as a single ground action does.
+        """
+        action = inst.action
         env = inst.binding()
-        name = " ".join((inst.action.name, *inst.args))
+        name = " ".join((action.name, *inst.args))
         durations, fixed = self._duration(inst, env)
-        conds: dict[str, _Conj] = {}
-        effs: dict[str, _Effs] = {}
+        body = Body()
         try:
-            self.conds(inst.action.conditions, env, conds, fixed)
-            self.effects(inst.action.effects, env, effs, fixed)
-        except Impossible as exc:
-            if exc.args == ("?duration",):
-                raise UnsupportedFeature(
-                    f"?duration in an effect of {inst.action.name} whose duration is not fixed",
-                    file=self.file,
-                    line=inst.action.line,
-                    column=inst.action.column,
-                ) from None
-            return None
-        if inst.action.duration is None:
-            return GroundAction(
-                index, name, _snap(conds.get(INST), effs.get(INST), None), None, 0, 0, (), (), None
+            clauses = self.condition(action.conditions, env, fixed)
+            if clauses:
+                self.effects(action.effects, env, body, fixed)
+            variants = _variants(clauses, body.guards)
+        except Impossible:
+            raise UnsupportedFeature(
+                f"?duration in an effect of {action.name} whose duration is not fixed",
+                file=self.file,
+                line=action.line,
+                column=action.column,
+            ) from None
+        except TooManyDisjuncts as exc:
+            raise self.too_many(
+                exc, f"the condition of {action.name}", action.line, action.column, self.file
+            ) from None
+        if action.duration is None:
+            effs = body.at(INST)
+            return [
+                GroundAction(index + k, name, build_snap(c.get(INST), effs, None), *_INSTANT)
+                for k, (c, _) in enumerate(variants)
+            ]
+        running = self.new_fact(f"{INTERNAL}running {name}") if len(variants) > 1 else 0
+        out = []
+        for k, (clause, guarded) in enumerate(variants):
+            inv = clause.get(ALL, Conj())
+            start, start_effs, end_effs = (
+                clause.get(START),
+                body.times.get(START),
+                body.times.get(END),
             )
-        inv = conds.get("all", _Conj())
-        return GroundAction(
-            index,
-            name,
-            _snap(conds.get(START), effs.get(START), inv),
-            _snap(conds.get(END), effs.get(END), inv),
-            inv.pre,
-            inv.neg,
-            tuple(inv.num),
-            durations,
-            fixed,
+            if running:
+                start = (start or Conj()).merged(Conj(neg=running))
+                start_effs = body.at(START).extended(add=running)
+            if running or guarded:
+                end_effs = body.at(END).extended(dele=running, cond=guarded)
+            out.append(
+                GroundAction(
+                    index + k,
+                    name,
+                    build_snap(start, start_effs, inv),
+                    build_snap(clause.get(END), end_effs, inv),
+                    inv.pre,
+                    inv.neg,
+                    tuple(inv.num),
+                    durations,
+                    fixed,
+                )
+            )
+        return out
+
+    def goal(self, conds: tuple[Cond, ...], file: str) -> list[Conj]:
+        """Return the disjuncts of a goal; [] when it can never hold."""
+        try:
+            clauses = self.condition(conds, {}, None)
+        except TooManyDisjuncts as exc:
+            raise self.too_many(exc, "the goal", 0, 0, file) from None
+        return [clause.get(INST, Conj()) for clause in clauses]
+
+    @staticmethod
+    def too_many(
+        exc: TooManyDisjuncts, what: str, line: int, column: int, file: str
+    ) -> UnsupportedFeature:
+        """Build the error for a disjunctive normal form past its limit, located at the
+        innermost disjunction it grew in, else at `line`/`column`."""
+        if exc.line:
+            line, column = exc.line, exc.column
+        return UnsupportedFeature(
+            f"{what} has {exc.count} disjuncts in disjunctive normal form, more than "
+            f"the {exc.limit} this planner grounds",
+            file=file,
+            line=line,
+            column=column,
         )
 
     def _duration(
@@ -269,38 +367,23 @@ class Compiler:
         return out, fixed
 
 
-def _snap(conj: _Conj | None, effs: _Effs | None, inv: _Conj | None) -> Snap:
-    """Build a snap action; the invariant counts as read for partial-order lifting."""
-    conj = conj or _Conj()
-    effs = effs or _Effs()
-    inv = inv or _Conj()
-    reads = conj.pre | conj.neg | inv.pre | inv.neg
-    writes = effs.add | effs.dele
-    num_reads = 0
-    for check in (*conj.num, *inv.num):
-        num_reads |= expr_vars(check.lhs) | expr_vars(check.rhs)
-    num_writes = 0
-    for assign in effs.num:
-        num_reads |= expr_vars(assign.expr)
-        num_writes |= 1 << assign.var
-    for ce in effs.cond:
-        reads |= ce.pre | ce.neg
-        writes |= ce.add | ce.dele
-        for check in ce.num_pre:
-            num_reads |= expr_vars(check.lhs) | expr_vars(check.rhs)
-        for assign in ce.num_eff:
-            num_reads |= expr_vars(assign.expr)
-            num_writes |= 1 << assign.var
-    return Snap(
-        conj.pre,
-        conj.neg,
-        tuple(conj.num),
-        effs.add,
-        effs.dele,
-        tuple(effs.num),
-        tuple(effs.cond),
-        reads,
-        writes,
-        num_reads,
-        num_writes,
-    )
+def _variants(
+    clauses: list[Clause], guards: list[Guard]
+) -> list[tuple[Clause, tuple[CondEffect, ...]]]:
+    """Split the condition's clauses further by each start-guarded conditional effect.
+
+    Each guard's distinct start conditions are either required or forbidden at start
+    (one copy per truth assignment), so the end snap knows which of them held.
+    """
+    variants: list[tuple[Clause, tuple[CondEffect, ...]]] = [(c, ()) for c in clauses]
+    for guard in guards:
+        outcomes = guard.outcomes()
+        variants = [
+            (merged, (*effects, *more))
+            for clause, effects in variants
+            for cond, more in outcomes
+            for merged in conjoin([clause], cond)
+        ]
+        if len(variants) > TooManyDisjuncts.limit:
+            raise TooManyDisjuncts(len(variants))
+    return variants

@@ -4,22 +4,31 @@ Three passes: lifted relaxed reachability finds the action instances worth creat
 compilation turns them into bitmask snap actions with statics folded away; a ground
 relaxed reachability with snap semantics then drops instances that can never start
 or never end.
+
+A disjunctive goal becomes a fact of the planner's own, `(#goal)`, that one internal
+instantaneous action per disjunct adds and every other happening deletes: it holds at
+the end of a plan exactly when a disjunct does. The search and its heuristic keep a
+conjunctive goal; plans never show the internal actions (plan.py), and simulating a
+plan tries them at its end (simulate.py).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
-from cbdi_planner.compile import Compiler, Impossible, _Conj
+from cbdi_planner.compile import Compiler
+from cbdi_planner.dnf import Conj
+from cbdi_planner.effects import Effs, build_snap
 from cbdi_planner.errors import Unsolvable
-from cbdi_planner.pddl.ast import INST, Domain, NumEffect, Problem
+from cbdi_planner.pddl.ast import Domain, NumEffect, Problem
 from cbdi_planner.reachability import (
     Objects,
     _walk_effects,
     fluent_predicates,
     reachable_instances,
 )
-from cbdi_planner.task import GroundAction, Task, TimedLiterals
+from cbdi_planner.task import INTERNAL, GroundAction, Snap, Task, TimedLiterals
 
 __all__ = ["ground"]
 
@@ -43,22 +52,19 @@ def ground(domain: Domain, problem: Problem) -> Task:
     )
     actions: list[GroundAction] = []
     for inst in instances:
-        action = compiler.action(inst, len(actions))
-        if action is not None:
-            actions.append(action)
-    goal = _Conj()
-    try:
-        conds: dict[str, _Conj] = {}
-        compiler.conds(problem.goal, {}, conds, None)
-        goal = conds.get(INST, _Conj())
-    except Impossible as exc:
-        raise Unsolvable(f"goal condition {exc.args[0]} can never hold") from None
+        actions.extend(compiler.actions(inst, len(actions)))
+    goals = compiler.goal(problem.goal, problem.file)
+    if not goals:
+        raise Unsolvable("the goal can never hold (a static or unreachable fact is wrong)")
+    tils = _timed_literals(problem, compiler)
+    goal = goals[0]
+    if len(goals) > 1:
+        goal, actions, tils = _disjunctive_goal(compiler, goals, actions, tils)
     init_facts = 0
     for atom in problem.init:
         index = compiler.fact_index.get((atom.predicate, *atom.args))
         if index is not None:
             init_facts |= 1 << index
-    tils = _timed_literals(problem, compiler)
     nums = [math.nan] * len(compiler.var_index)
     for key, var in compiler.var_index.items():
         nums[var] = compiler.init_numeric.get(key, math.nan)
@@ -76,6 +82,36 @@ def ground(domain: Domain, problem: Problem) -> Task:
     )
     task.actions = _prune(task)
     return task
+
+
+def _disjunctive_goal(
+    compiler: Compiler,
+    goals: list[Conj],
+    actions: list[GroundAction],
+    tils: list[TimedLiterals],
+) -> tuple[Conj, list[GroundAction], list[TimedLiterals]]:
+    """Compile a disjunctive goal into `(#goal)`, added by one internal action per
+    disjunct and deleted by every other happening (so it holds only when a disjunct
+    holds after the last one)."""
+    bit = compiler.new_fact(f"{INTERNAL}goal")
+    out = [_deleting(a, bit) for a in actions]
+    reached = Effs(add=bit)
+    for k, conj in enumerate(goals):
+        snap = build_snap(conj, reached, None)
+        out.append(GroundAction(len(out), f"{INTERNAL}goal {k}", snap, None, 0, 0, (), (), None))
+    tils = [TimedLiterals(t.time, t.add, t.dele | bit) for t in tils]
+    return Conj(pre=bit), out, tils
+
+
+def _deleting(action: GroundAction, bit: int) -> GroundAction:
+    """Make every snap of `action` delete `bit`, without counting it as a write: the
+    goal fact orders nothing when the plan is lifted to a partial order."""
+
+    def snap(s: Snap) -> Snap:
+        return dataclasses.replace(s, dele=s.dele | bit)
+
+    end = snap(action.end) if action.end is not None else None
+    return dataclasses.replace(action, start=snap(action.start), end=end)
 
 
 def _timed_literals(problem: Problem, compiler: Compiler) -> list[TimedLiterals]:

@@ -50,12 +50,15 @@ class Plan:
 
 
 def plan_from_timeline(task: Task, timeline: Timeline) -> Plan:
-    """Read the scheduled plan off a complete timeline (every start has its end)."""
+    """Read the scheduled plan off a complete timeline (every start has its end), leaving
+    out the planner's internal actions (those of a disjunctive goal)."""
     ends = {s.partner: k for k, s in enumerate(timeline.steps) if s.kind == END}
     out = []
     for k, step in enumerate(timeline.steps):
+        if step.kind not in (START, INST) or task.actions[step.action].internal:
+            continue  # ends are read with their starts; internal actions are no plan's
         time = round(timeline.times[k], 6)
-        name = task.actions[step.action].name if step.kind in (START, INST) else ""
+        name = task.actions[step.action].name
         if step.kind == INST:
             out.append(ScheduledAction(time, name, None))
         elif step.kind == START:

@@ -14,6 +14,7 @@ from cbdi_planner.plan import Plan, ScheduledAction
 from cbdi_planner.state import (
     State,
     apply_end,
+    apply_instant,
     apply_start,
     apply_til,
     broken_invariant,
@@ -22,7 +23,7 @@ from cbdi_planner.state import (
 )
 from cbdi_planner.task import GroundAction, Task
 
-__all__ = ["Simulation", "simulate", "validate"]
+__all__ = ["Simulation", "goal_reached", "simulate", "validate"]
 
 _TOLERANCE = 1e-6
 # At one time: ends first, then timed literals, then starts (as VAL orders happenings
@@ -62,22 +63,43 @@ def simulate(
 
     An action is checked at its start (at-start condition, duration constraints, no
     running invariant broken), while it runs (its invariant after every happening) and
-    at its end (at-end condition).
+    at its end (at-end condition). A name several ground actions share (one per
+    disjunct of a condition) may be any of them: the simulation follows every one that
+    can happen, so `state` is the first of the states the plan may be in.
     """
-    by_name = {a.name: a for a in task.actions}
+    variants = _by_name(task)
     actions = plan.actions if horizon is None else plan.actions[:horizon]
     current = state or initial_state(task)
     sim = Simulation(current, 0.0)
+    frontier = [current]
     for time, kind, index in _happenings(task, actions, current):
         sim.time = time
         step = actions[index] if index >= 0 else None
-        failure = _happen(task, by_name, sim, kind, step, epsilon)
-        if failure:
-            sim.failed, sim.reason = index, failure
+        after = _happen(task, variants, frontier, kind, step, epsilon)
+        if not after:
+            sim.failed = index
+            sim.reason = _why_not(task, variants, frontier[0], kind, step, epsilon)
             return sim
+        frontier = after
+        sim.state = frontier[0]
         sim.trace.append((time, sim.state))
-    sim.goal_reached = is_goal(task, sim.state)
+    reached = [s for s in frontier if goal_reached(task, s)]
+    sim.goal_reached = bool(reached)
+    if reached:
+        sim.state = reached[0]
     return sim
+
+
+def goal_reached(task: Task, state: State) -> bool:
+    """Tell whether the problem's goal holds and no action runs; a disjunctive goal
+    holds when one of its internal actions would reach the search's goal fact."""
+    if is_goal(task, state):
+        return True
+    return any(
+        (after := apply_instant(task, state, action)) is not None and is_goal(task, after)
+        for action in task.actions
+        if action.internal
+    )
 
 
 def validate(task: Task, plan: Plan, *, epsilon: float = 0.001) -> Simulation:
@@ -89,6 +111,14 @@ def validate(task: Task, plan: Plan, *, epsilon: float = 0.001) -> Simulation:
     if not sim.goal_reached:
         raise PlanInvalid(f"the plan ends at {sim.time:.3f} without reaching the goal")
     return sim
+
+
+def _by_name(task: Task) -> dict[str, list[GroundAction]]:
+    out: dict[str, list[GroundAction]] = {}
+    for action in task.actions:
+        if not action.internal:
+            out.setdefault(action.name, []).append(action)
+    return out
 
 
 def _happenings(
@@ -105,41 +135,55 @@ def _happenings(
 
 def _happen(
     task: Task,
-    by_name: dict[str, GroundAction],
-    sim: Simulation,
+    variants: dict[str, list[GroundAction]],
+    frontier: list[State],
+    kind: int,
+    step: ScheduledAction | None,
+    epsilon: float,
+) -> list[State]:
+    """Return the states one happening can lead to from any state of `frontier`."""
+    out: dict[tuple[object, ...], State] = {}
+    for state in frontier:
+        if step is None:
+            after: list[State | None] = [apply_til(task, state)]
+        elif kind == _END:
+            running = [a for a in variants.get(step.name, ()) if a.index in state.open]
+            after = [apply_end(task, state, a) for a in running]
+        else:
+            after = [
+                apply_start(task, state, a)
+                for a in variants.get(step.name, ())
+                if not _check_duration(a, step, state, epsilon)
+            ]
+        for new in after:
+            if new is not None:
+                out.setdefault(new.key(), new)
+    return list(out.values())
+
+
+def _why_not(
+    task: Task,
+    variants: dict[str, list[GroundAction]],
+    state: State,
     kind: int,
     step: ScheduledAction | None,
     epsilon: float,
 ) -> str:
-    """Apply one happening to `sim.state`; return why it failed, or '' if it happened."""
+    """Say why a happening cannot happen from `state` (the first alternative's reason)."""
     if step is None:
-        after = apply_til(task, sim.state)
-        if after is None:
-            return "a timed literal breaks the invariant of a running action"
-        sim.state = after
-        return ""
-    action = by_name.get(step.name)
-    if action is None:
+        return "a timed literal breaks the invariant of a running action"
+    candidates = variants.get(step.name)
+    if not candidates:
         return "no such action, or its conditions can never hold from this state"
+    action = candidates[0]
     if kind == _END:
-        assert action.end is not None
-        after = apply_end(task, sim.state, action)
-        if after is None:
-            return (
-                "its at-end condition does not hold"
-                if action.index in sim.state.open
-                else ("it is not running")
-            )
-        sim.state = after
-        return ""
-    failure = _check_duration(action, step, sim.state, epsilon)
-    if failure:
-        return failure
-    after = apply_start(task, sim.state, action)
-    if after is None:
-        return _why_not_start(task, action, sim.state)
-    sim.state = after
-    return ""
+        if any(a.index in state.open for a in candidates):
+            return "its at-end condition does not hold"
+        return "it is not running"
+    reason = _check_duration(action, step, state, epsilon) or _why_not_start(task, action, state)
+    if len(candidates) == 1:
+        return reason
+    return f"none of its {len(candidates)} alternative conditions holds (the first: {reason})"
 
 
 def _check_duration(

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 __all__ = [
+    "INTERNAL",
     "CondEffect",
     "GroundAction",
     "NExpr",
@@ -24,6 +25,9 @@ __all__ = [
     "expr_vars",
     "holds",
 ]
+
+# The facts and actions the planner adds itself start with this, which no PDDL name can.
+INTERNAL = "#"
 
 # A compiled numeric expression: ("c", value) | ("v", var) | (op, lhs, rhs).
 NExpr = tuple[Any, ...]
@@ -164,6 +168,9 @@ class Snap:
 class GroundAction:
     """A ground action; `end` is None for an instantaneous action.
 
+    Several ground actions may share a name: one per disjunct of a disjunctive
+    condition. A plan names the action, and any of them may be the one meant.
+
     The invariant (`inv`, `inv_neg`, `inv_num`) is the `over all` condition.
     `duration` holds `(op, expr)` constraints; `fixed_duration` is set when they pin a
     constant, which is the common case.
@@ -183,6 +190,11 @@ class GroundAction:
     def durative(self) -> bool:
         """Tell whether the action has a start and an end."""
         return self.end is not None
+
+    @property
+    def internal(self) -> bool:
+        """Tell whether the planner added the action (it never appears in a plan)."""
+        return self.name.startswith(INTERNAL)
 
     def duration_bounds(self, nums: tuple[float, ...], epsilon: float) -> tuple[float, float]:
         """Return the [min, max] duration allowed when starting in a state with `nums`."""

@@ -18,6 +18,7 @@ __all__ = [
     "Domain",
     "DurationVar",
     "Effect",
+    "ExistsCond",
     "Expr",
     "FHead",
     "ForallCond",
@@ -25,6 +26,7 @@ __all__ = [
     "Lit",
     "Num",
     "NumEffect",
+    "OrCond",
     "Param",
     "Problem",
     "TimedLiteral",
@@ -112,7 +114,33 @@ class ForallCond:
     body: tuple[Cond, ...]
 
 
-Cond = Lit | Compare | ForallCond
+@dataclass(frozen=True, slots=True)
+class ExistsCond:
+    """An existentially quantified condition, a disjunction over the objects when grounding.
+
+    `line`/`column` locate it, for the error when its disjunctive form grows too large.
+    """
+
+    params: tuple[Param, ...]
+    body: tuple[Cond, ...]
+    line: int = 0
+    column: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class OrCond:
+    """A disjunction of conjunctions; no part at all is the condition that never holds.
+
+    The parser pushes negation down to literals and comparisons and reads `imply` as
+    `or`, so this and `ExistsCond` are the only disjunctive nodes.
+    """
+
+    parts: tuple[tuple[Cond, ...], ...]
+    line: int = 0
+    column: int = 0
+
+
+Cond = Lit | Compare | ForallCond | ExistsCond | OrCond
 
 
 @dataclass(frozen=True, slots=True)
@@ -144,10 +172,16 @@ class ForallEffect:
 
 @dataclass(frozen=True, slots=True)
 class WhenEffect:
-    """A conditional effect: `body` happens only where `condition` holds."""
+    """A conditional effect: `body` happens only where `condition` holds.
+
+    In a durative action the condition may be at other times than the effect (a start
+    condition guarding an end effect); `line`/`column` locate it for errors.
+    """
 
     condition: tuple[Cond, ...]
     body: tuple[Effect, ...]
+    line: int = 0
+    column: int = 0
 
 
 Effect = TimedLiteral | NumEffect | ForallEffect | WhenEffect

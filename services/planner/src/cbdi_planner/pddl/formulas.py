@@ -2,7 +2,8 @@
 
 A durative action's conditions must be wrapped in `at start`, `over all` or `at end`
 and its effects in `at start` or `at end`; an instantaneous action, a goal or a
-conditional effect of an instantaneous action uses the time `inst`.
+conditional effect of an instantaneous action uses the time `inst`. Disjunctions stay
+lifted (`OrCond`, `ExistsCond`); grounding turns them into disjunctive normal form.
 """
 
 from __future__ import annotations
@@ -16,11 +17,13 @@ from cbdi_planner.pddl.ast import (
     Compare,
     Cond,
     Effect,
+    ExistsCond,
     FHead,
     ForallCond,
     ForallEffect,
     Lit,
     NumEffect,
+    OrCond,
     Param,
     TimedLiteral,
     WhenEffect,
@@ -31,6 +34,7 @@ from cbdi_planner.pddl.sexpr import SList, SNode, Sym
 __all__ = ["read_condition", "read_effect"]
 
 _COMPARE = {"<", "<=", "=", ">=", ">"}
+_NEGATED = {"<": ">=", "<=": ">", ">=": "<", ">": "<="}
 _NUM_EFFECTS = {"increase", "decrease", "assign", "scale-up", "scale-down"}
 _COND_TIMES = {("at", "start"): START, ("over", "all"): ALL, ("at", "end"): END}
 _EFF_TIMES = {("at", "start"): START, ("at", "end"): END}
@@ -53,49 +57,92 @@ def _scope_with(scope: dict[str, Param], params: tuple[Param, ...]) -> dict[str,
 
 
 def read_condition(
-    r: Reader, node: SNode, scope: dict[str, Param], time: str | None
+    r: Reader,
+    node: SNode,
+    scope: dict[str, Param],
+    time: str | None,
+    positive: bool = True,
+    retime: bool = False,
 ) -> tuple[Cond, ...]:
-    """Read a condition; `time` None means a durative action's untimed top level."""
+    """Read a condition, negated unless `positive`; `time` None means a durative
+    action's untimed top level.
+
+    Negation is pushed down to literals and comparisons (De Morgan; `not forall` is
+    `exists not`, `not exists` is `forall not`) and `(imply a b)` is read as
+    `(or (not a) b)`, so later stages see only `and`, `or`, `forall` and `exists`.
+    `retime` lets a time specifier inside override `time` (a `when` condition inside
+    a timed effect may name the time it is checked at).
+    """
     lst = r.as_list(node, "a condition '(...)'")
     op = r.head(lst)
     if op == "and":
-        return tuple(c for item in lst.items[1:] for c in read_condition(r, item, scope, time))
+        parts = [read_condition(r, i, scope, time, positive, retime) for i in lst.items[1:]]
+        return _all(parts) if positive else _any(lst, parts)
     if not lst.items:
-        return ()
+        return () if positive else _any(lst, [])
     when = _timed(lst, _COND_TIMES)
     if when is not None:
-        if time is not None:
+        if time is not None and not retime:
             raise r.syntax(lst, "nested time specifier", "a plain condition")
-        return read_condition(r, lst.items[2], scope, when)
+        return read_condition(r, lst.items[2], scope, when, positive)
     if time is None:
         raise r.syntax(
             lst,
             f"untimed condition {op!r} in a durative action",
             "(at start ...), (over all ...) or (at end ...)",
         )
-    if op == "forall":
-        r.arity(lst, 3, "(forall (?x - type) condition)")
+    if op in ("or", "imply", "not"):
+        return _connective(r, lst, scope, time, positive, retime)
+    if op in ("forall", "exists"):
+        r.arity(lst, 3, f"({op} (?x - type) condition)")
         params = r.params(lst.items[1])
-        body = read_condition(r, lst.items[2], _scope_with(scope, params), time)
-        return (ForallCond(params, body),)
-    if op in ("or", "imply", "exists"):
-        raise r.unsupported(
-            lst,
-            f"'{op}' in conditions is not supported (only conjunctions, "
-            "negation, equality, comparisons and forall)",
-        )
-    if op == "not":
-        r.arity(lst, 2, "(not (predicate ...))")
-        inner = r.as_list(lst.items[1], "(not (predicate ...))")
-        if r.head(inner) in ("and", "or", "not", "forall", "exists", "imply") or (
-            r.head(inner) in _COMPARE and not _is_equality(inner)
-        ):
-            raise r.unsupported(inner, "negation of a compound or numeric condition")
-        return (_literal(r, inner, scope, False, time),)
+        body = read_condition(r, lst.items[2], _scope_with(scope, params), time, positive, retime)
+        if (op == "forall") == positive:
+            return (ForallCond(params, body),)
+        return (ExistsCond(params, body, lst.line, lst.column),)
     if op in _COMPARE and not _is_equality(lst):
         r.arity(lst, 3, f"({op} expression expression)")
-        return (Compare(op, r.expr(lst.items[1], scope), r.expr(lst.items[2], scope), time),)
-    return (_literal(r, lst, scope, True, time),)
+        lhs, rhs = r.expr(lst.items[1], scope), r.expr(lst.items[2], scope)
+        if positive:
+            return (Compare(op, lhs, rhs, time),)
+        if op == "=":
+            return _any(lst, [(Compare("<", lhs, rhs, time),), (Compare(">", lhs, rhs, time),)])
+        return (Compare(_NEGATED[op], lhs, rhs, time),)
+    return (_literal(r, lst, scope, positive, time),)
+
+
+def _connective(
+    r: Reader, lst: SList, scope: dict[str, Param], time: str, positive: bool, retime: bool
+) -> tuple[Cond, ...]:
+    """Read `or`, `imply` and `not`, with the polarity pushed to their arguments."""
+    op = r.head(lst)
+    if op == "not":
+        r.arity(lst, 2, "(not condition)")
+        return read_condition(r, lst.items[1], scope, time, not positive, retime)
+    if op == "imply":
+        r.arity(lst, 3, "(imply condition condition)")
+        premise = read_condition(r, lst.items[1], scope, time, not positive, retime)
+        conclusion = read_condition(r, lst.items[2], scope, time, positive, retime)
+        return _any(lst, [premise, conclusion]) if positive else _all([premise, conclusion])
+    parts = [read_condition(r, i, scope, time, positive, retime) for i in lst.items[1:]]
+    return _any(lst, parts) if positive else _all(parts)
+
+
+def _all(parts: list[tuple[Cond, ...]]) -> tuple[Cond, ...]:
+    return tuple(c for part in parts for c in part)
+
+
+def _any(lst: SList, parts: list[tuple[Cond, ...]]) -> tuple[Cond, ...]:
+    """Build a disjunction; one part is just that part, and nested ones are flattened."""
+    if len(parts) == 1:
+        return parts[0]
+    flat: list[tuple[Cond, ...]] = []
+    for part in parts:
+        if len(part) == 1 and isinstance(part[0], OrCond):
+            flat.extend(part[0].parts)
+        else:
+            flat.append(part)
+    return (OrCond(tuple(flat), lst.line, lst.column),)
 
 
 def _is_equality(lst: SList) -> bool:
@@ -145,8 +192,10 @@ def read_effect(
         )
     if op == "when":
         r.arity(lst, 3, "(when condition effect)")
-        condition = read_condition(r, lst.items[1], scope, time)
-        return (WhenEffect(condition, read_effect(r, lst.items[2], scope, time)),)
+        retime = time in (START, END)
+        condition = read_condition(r, lst.items[1], scope, time, retime=retime)
+        body = read_effect(r, lst.items[2], scope, time)
+        return (WhenEffect(condition, body, lst.line, lst.column),)
     when = _timed(lst, _EFF_TIMES)
     if when is not None:
         if time is not None:

@@ -21,8 +21,8 @@ __all__ = ["parse_domain", "parse_problem"]
 
 _DURATION_OPS = {"=", "<=", ">="}
 
-# Requirements the planner handles (those that allow `or`/`exists` are accepted here:
-# the parser rejects such a formula where it is used, pointing at it).
+# Requirements the planner handles (`or`, `imply` and `exists` become disjunctive
+# normal form when grounding; see dnf.py).
 _SUPPORTED_REQUIREMENTS = {
     ":strips",
     ":typing",
