@@ -95,6 +95,13 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--expansions", type=int, default=None, help="node expansion budget")
     parser.add_argument("--search", choices=STRATEGIES, default="auto")
     parser.add_argument(
+        "--compress",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="search whole actions instead of their starts and ends (auto: when no "
+        "concurrency is required, falling back to starts and ends)",
+    )
+    parser.add_argument(
         "--anytime", action="store_true", help="keep searching for shorter makespans"
     )
     parser.add_argument("--epsilon", type=float, default=0.001)
@@ -137,6 +144,7 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
         epsilon=args.epsilon,
         budget=Budget(args.expansions, args.timeout),
         on_plan=on_plan,
+        compress={"auto": None, "yes": True, "no": False}[args.compress],
     )
     phases["search"] = time.perf_counter() - t0
     stats = result.stats
@@ -147,6 +155,7 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
         "evaluated": stats.evaluated,
         "inconsistent": stats.inconsistent,
         "plans": stats.plans,
+        "compressed": stats.compressed,
     }
     report["seconds"] = {k: round(v, 4) for k, v in phases.items()}
     report["improvements"] = improvements

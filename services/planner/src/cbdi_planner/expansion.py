@@ -38,9 +38,10 @@ class Node:
 class Expander:
     """Generate and evaluate successors; counts what it does in `generated`/`evaluated`."""
 
-    def __init__(self, task: Task, epsilon: float) -> None:
+    def __init__(self, task: Task, epsilon: float, compress: bool = False) -> None:
         self.task = task
         self.epsilon = epsilon
+        self.compress = compress
         self.rpg = RelaxedPlanGraph(task)
         self.generated = 0
         self.evaluated = 0
@@ -119,7 +120,29 @@ class Expander:
                 continue
             step = Step(START, action.index, action.start, -1, low, high)
             running = (*node.running, (action.index, len(timeline.steps)))
-            yield from self._extend(new, timeline, step, tuple(sorted(running)))
+            if self.compress:
+                yield from self._whole(new, timeline, step, tuple(sorted(running)))
+            else:
+                yield from self._extend(new, timeline, step, tuple(sorted(running)))
+
+    def _whole(
+        self, state: State, timeline: Timeline, step: Step, running: tuple[tuple[int, int], ...]
+    ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
+        """Append a start and, at once, its end: the action as one compressed happening.
+
+        The state passes through the start's effects (its end condition and invariant
+        are checked there, as a sequential execution would); the timeline still lifts
+        the two steps into a partial order, so later actions may overlap this one.
+        """
+        action = self.task.actions[step.action]
+        assert action.end is not None
+        for started, begun, _ in self._extend(state, timeline, step, running):
+            ended = apply_end(self.task, started, action)
+            if ended is None:
+                return
+            rest = tuple(r for r in running if r[0] != step.action)
+            end = Step(END, step.action, action.end, len(timeline.steps), step.low, step.high)
+            yield from self._extend(ended, begun, end, rest)
 
     def _candidates(self, node: Node, helpful_only: bool) -> list[int]:
         """Return, in index order, the actions that may start in `node` (helpful ones)."""

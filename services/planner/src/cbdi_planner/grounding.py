@@ -128,11 +128,14 @@ def _timed_literals(problem: Problem, compiler: Compiler) -> list[TimedLiterals]
 def _prune(task: Task) -> list[GroundAction]:
     """Keep the actions whose start and end are relaxed-reachable, renumbered.
 
-    Deletes and numeric conditions are ignored, so this never drops a useful action.
+    Starts and ends are reached separately, as snap actions: an end may need what
+    another action's start gives later (required concurrency). Deletes and numeric
+    conditions are ignored, so this never drops a useful action.
     """
     reached = task.init_facts
     for til in task.tils:
         reached |= til.add
+    started: set[int] = set()
     live: set[int] = set()
     changed = True
     while changed:
@@ -140,18 +143,19 @@ def _prune(task: Task) -> list[GroundAction]:
         for action in task.actions:
             if action.index in live:
                 continue
-            start = action.start
-            if start.pre & ~reached:
-                continue
-            gained = reached | start.add | _cond_adds(start)
-            if action.end is not None:
-                end = action.end
-                if (action.inv | end.pre) & ~gained:
+            if action.index not in started:
+                start = action.start
+                if start.pre & ~reached:
                     continue
-                gained |= end.add | _cond_adds(end)
+                started.add(action.index)
+                reached |= start.add | _cond_adds(start)
+                changed = True
+            end = action.end
+            if end is not None:
+                if (action.inv | end.pre) & ~reached:
+                    continue
+                reached |= end.add | _cond_adds(end)
             live.add(action.index)
-            if gained != reached:
-                reached = gained
             changed = True
     kept = [a for a in task.actions if a.index in live]
     return [_renumber(a, i) for i, a in enumerate(kept)]

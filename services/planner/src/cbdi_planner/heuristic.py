@@ -186,6 +186,7 @@ class RelaxedPlanGraph:
         self.op_duration = [self._duration(op) for op in ops]
         self.then = [then.get(k, -1) for k in range(len(ops))]
         self.chained_end = {ops[k].action: k for k in chained}
+        self.start_op = {op.action: k for k, op in enumerate(ops) if op.kind == START}
 
     def _duration(self, op: _Op) -> float:
         """Return the (least) duration an op stands for: its action's, for a start."""
@@ -313,12 +314,15 @@ class RelaxedPlanGraph:
             buckets[level[g]].add(g)
         chosen: set[int] = set()
         done: set[int] = set()
-        op_pre, op_add = self.op_pre, self.op_add
+        sought: list[int] = []  # facts chosen ends of actions started at layer 0 give
+        op_pre, op_add, ops = self.op_pre, self.op_add, self.ops
         for depth in range(top, 0, -1):
             for g in buckets[depth]:
                 if g in done:
                     continue
                 k = achiever[g]
+                if depth == 2 and ops[k].kind == END:
+                    sought.append(g)
                 if k in chosen:
                     continue
                 chosen.add(k)
@@ -328,12 +332,20 @@ class RelaxedPlanGraph:
                         buckets[level[p]].add(p)
         helpful = set()
         if top >= 1:
-            ops = self.ops
             for g in buckets[1]:
                 for k in self.adders[g]:
                     if op_level[k] == 0:
                         op = ops[k]
                         if op.kind != TIL or op.action == state.til:
                             helpful.add((op.kind, op.action))
+        # FF's helpful actions are all those adding a goal of layer 1; a durative
+        # action adds its facts a layer after its start, so every action that could
+        # start now and whose end gives a fact the relaxed plan ends an action for is
+        # helpful too, not only the one the relaxed plan happened to choose.
+        for g in sought:
+            for k in self.adders[g]:
+                op = ops[k]
+                if op.kind == END and op_level[self.start_op[op.action]] == 0:
+                    helpful.add((START, op.action))
         duration = sum(self.op_duration[k] for k in chosen)
         return Estimate(len(chosen), frozenset(helpful), duration)

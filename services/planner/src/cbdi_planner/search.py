@@ -14,6 +14,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+from cbdi_planner.compression import needs_concurrency
 from cbdi_planner.errors import SearchTimeout
 from cbdi_planner.expansion import Expander, Node
 from cbdi_planner.plan import Plan, plan_from_timeline
@@ -45,6 +46,7 @@ class SearchStats:
     seconds: float = 0.0
     strategy: str = ""
     plans: int = 0
+    compressed: bool = False
 
 
 @dataclass(slots=True)
@@ -94,7 +96,12 @@ def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | No
         while queue and better is None:
             node = queue.popleft()
             clock.tick()
-            for state, timeline, running in ex.successors(node, helpful_only=True):
+            # Shortest partial plans first: of equally good successors, the one that
+            # runs in parallel with the plan so far wins.
+            successors = sorted(
+                ex.successors(node, helpful_only=True), key=lambda s: s[1].makespan
+            )
+            for state, timeline, running in successors:
                 if state.key() in seen:
                     continue
                 seen.add(state.key())
@@ -247,17 +254,32 @@ def search(
     state: State | None = None,
     on_plan: Callable[[Plan], None] | None = None,
     now: Callable[[], float] = time.monotonic,
+    compress: bool | None = None,
 ) -> SearchResult:
-    """Search for a plan from `state` (default: the initial state) within `budget`."""
+    """Search for a plan from `state` (default: the initial state) within `budget`.
+
+    `compress` searches whole actions (start and end at once, `compression`); None
+    (default) does so when the task needs no concurrency, and falls back to snap
+    actions if the compressed space turns out to hold no plan.
+    """
     if strategy not in STRATEGIES:
         raise ValueError(f"unknown search strategy {strategy!r}; use one of {STRATEGIES}")
     stats = SearchStats(strategy=strategy)
     clock = _Clock(budget or Budget(), now, stats)
-    ex = Expander(task, epsilon)
+    stats.compressed = not needs_concurrency(task) if compress is None else compress
+    ex = Expander(task, epsilon, compress=stats.compressed)
     result = SearchResult("timeout", None, stats)
+    counted: list[Expander] = [ex]
     try:
         root = ex.root(state or initial_state(task))
         goal = _first_plan(ex, root, clock, strategy, stats) if not ex.dead(root) else None
+        if goal is None and stats.compressed and compress is None:
+            # The compressed space has no plan: one may need overlapping actions.
+            ex = Expander(task, epsilon)
+            counted.append(ex)
+            root = ex.root(state or initial_state(task))
+            stats.compressed = False
+            goal = _first_plan(ex, root, clock, strategy, stats)
         if goal is None:
             result.status = "incomplete" if stats.strategy == "ehc" else "unsolvable"
         else:
@@ -268,8 +290,9 @@ def search(
     except SearchTimeout:
         # The budget ran out: "timeout" unless a plan was found (anytime: the best so far).
         result.status = "solved" if result.plan is not None else "timeout"
-    stats.generated, stats.evaluated = ex.generated, ex.evaluated
-    stats.inconsistent = ex.inconsistent
+    stats.generated = sum(e.generated for e in counted)
+    stats.evaluated = sum(e.evaluated for e in counted)
+    stats.inconsistent = sum(e.inconsistent for e in counted)
     stats.seconds = clock.elapsed()
     return result
 
