@@ -8,6 +8,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from planning import validate
+from test_disjunction import LIGHTS, LIGHTS_PROBLEM
 
 from cbdi_planner.continual import (
     COMMITTED_FAILS,
@@ -26,7 +28,7 @@ from cbdi_planner.continual import (
 )
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl import parse_domain, parse_problem
-from cbdi_planner.plan import Plan
+from cbdi_planner.plan import Plan, ScheduledAction
 from cbdi_planner.search import search
 from cbdi_planner.state import State, initial_state
 from cbdi_planner.task import Task
@@ -162,3 +164,102 @@ def test_commit_counts_started_steps_and_simulates_them(task: Task) -> None:
     robot_at = plan.actions[2].name.split()[-1]
     assert done.state is not None
     assert f"(in robot1 {robot_at})" in task.fact_names(done.state.facts)
+
+
+# -- disjunctions: internal goal actions and actions split into copies -------------------
+
+
+def parsed(domain_text: str, problem_text: str) -> Task:
+    domain = parse_domain(domain_text, "domain.pddl")
+    return ground(domain, parse_problem(problem_text, domain, "problem.pddl"))
+
+
+@pytest.mark.parametrize("bound", [RoundBound(expansions=1), RoundBound(expansions=100)])
+def test_partial_plans_for_a_disjunctive_goal_leave_out_the_goal_actions(
+    bound: RoundBound, tmp_path: Path
+) -> None:
+    task = parsed(LIGHTS, LIGHTS_PROBLEM)
+    assert any(a.internal for a in task.actions)
+    events = run(SearchThread(task, initial_state(task)), bound)
+    parts = [e for e in events if isinstance(e, PartialPlanFound)]
+    assert parts and parts[-1].complete
+    names = [a.name for p in parts for a in p.plan.actions]
+    assert not any(name.startswith("#") for name in names)
+    assert names[:2] == ["switch-on", "work"] and len(names) == 3
+    assert all(r.plan_actions <= 3 for r in events if isinstance(r, RoundDone))
+    files = (
+        (tmp_path / "domain.pddl", LIGHTS),
+        (tmp_path / "problem.pddl", LIGHTS_PROBLEM),
+        (tmp_path / "plan.txt", whole(events).to_ipc()),
+    )
+    for path, text in files:
+        path.write_text(text)
+    valid, output = validate(*(path for path, _ in files))
+    assert valid, output
+
+
+DRY = """
+(define (domain dry)
+  (:requirements :typing :durative-actions :conditional-effects :disjunctive-preconditions)
+  (:types item)
+  (:predicates (dry ?x - item) (wet ?x - item) (sunny) (painted ?x - item)
+               (shipped ?x - item) (at-dock ?x - item) (on-truck ?x - item)
+               (loaded ?x - item))
+  (:durative-action paint :parameters (?x - item) :duration (= ?duration 2)
+    :condition (at start (not (painted ?x)))
+    :effect (and (at start (not (dry ?x))) (at start (wet ?x)) (at end (painted ?x))
+                 (at end (when (at start (dry ?x)) (and (dry ?x) (not (wet ?x)))))))
+  (:action wipe :parameters (?x - item) :precondition (wet ?x)
+    :effect (and (dry ?x) (not (wet ?x))))
+  (:durative-action load :parameters (?x - item) :duration (= ?duration 1)
+    :condition (at start (or (at-dock ?x) (on-truck ?x)))
+    :effect (and (at start (not (at-dock ?x))) (at start (not (on-truck ?x)))
+                 (at end (loaded ?x))))
+  (:action bring :parameters (?x - item) :precondition () :effect (at-dock ?x))
+  (:action stow :parameters (?x - item) :precondition (at-dock ?x)
+    :effect (and (not (at-dock ?x)) (on-truck ?x)))
+  (:action ship :parameters (?x - item) :precondition (and (painted ?x) (dry ?x))
+    :effect (shipped ?x)))
+"""
+
+
+def dry_task(init: str) -> Task:
+    problem = f"""(define (problem p) (:domain dry) (:objects a - item)
+      (:init {init}) (:goal (and (shipped a) (loaded a))))"""
+    return parsed(DRY, problem)
+
+
+def test_a_started_split_action_is_the_copy_that_applies() -> None:
+    """`paint a` is split by whether `a` was dry at its start: the first copy (dry at
+    start, so dry again at its end) is wrong for an item that is not dry."""
+    task = dry_task("(at-dock a)")
+    copies = [a for a in task.actions if a.name == "paint a"]
+    assert len(copies) == 2 and copies[0].start.pre  # the first copy needs (dry a)
+    paint = ScheduledAction(0.0, "paint a", 2.0)
+    steps = [paint, ScheduledAction(2.001, "ship a", None)]
+    done = commit(task, steps, {0: "running"})
+    assert done.state is not None and (done.count, done.finished) == (1, 0)
+    assert set(task.fact_names(done.state.facts)) == {"(at-dock a)", "(painted a)", "(wet a)"}
+    fails = forecast(task, steps, {0: "running"})
+    assert fails.kind == FAILS_LATER and fails.failed == 1 and "(dry a)" in fails.reason
+    dry = dry_task("(at-dock a) (dry a)")
+    assert forecast(dry, steps, {0: "running"}).kind == HOLDS
+
+
+def test_a_started_split_action_whose_start_shows_in_the_beliefs() -> None:
+    """The beliefs already show `load a`'s start (`a` left the dock): no copy's start
+    condition holds now, but the one whose only unmet facts its start changed fits."""
+    task = dry_task("(dry a)")
+    assert len([a for a in task.actions if a.name == "load a"]) == 2
+    load = ScheduledAction(0.0, "load a", 1.0)
+    done = commit(task, [load], {0: "running"})
+    assert done.state is not None
+    assert "(loaded a)" in task.fact_names(done.state.facts)
+
+
+def test_a_started_split_action_that_no_copy_fits_is_not_applicable() -> None:
+    task = dry_task("(at-dock a) (painted a)")  # both copies of paint need it unpainted
+    steps = [ScheduledAction(0.0, "paint a", 2.0)]
+    done = commit(task, steps, {0: "running"})
+    assert done.state is None and done.reason == "(paint a) is not applicable"
+    assert forecast(task, steps, {0: "running"}).kind == COMMITTED_FAILS

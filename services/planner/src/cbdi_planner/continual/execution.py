@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from cbdi_planner.plan import Plan, ScheduledAction
 from cbdi_planner.simulate import simulate
 from cbdi_planner.state import State
-from cbdi_planner.task import Task
+from cbdi_planner.task import GroundAction, Task, holds
 
 __all__ = [
     "COMMITTED_FAILS",
@@ -57,15 +57,44 @@ class Forecast:
 
 
 def _force(task: Task, state: State, name: str) -> State | None:
-    """Apply an already started action's effects without checking its conditions (the
-    world decided it could start; the beliefs may already show part of its effects)."""
-    action = next((a for a in task.actions if a.name == name), None)
-    if action is None:
+    """Apply an already started action's effects (the world decided it could start; the
+    beliefs may already show part of its effects); None if no copy of it fits.
+
+    A name split into copies, one per disjunct of its conditions, means the copy that
+    applies in `state`: its start condition holds and, for a durative one, its invariant
+    and end condition hold after its start effects (which copy's effects happen depends
+    on what held at its start). Failing that, the copy whose start condition holds but
+    for the facts its start changes (beliefs that already show them). A lone copy is
+    forced unchecked.
+    """
+    copies = [a for a in task.actions if a.name == name and not a.internal]
+    if len(copies) > 1:
+        copies = [a for a in copies if _fits(a, state, False)] or [
+            a for a in copies if _fits(a, state, True)
+        ]
+    if not copies:
         return None
+    action = copies[0]
     facts, nums = action.start.apply(state.facts, state.nums)
     if action.end is not None:
         facts, nums = action.end.apply(facts, nums)
     return State(facts, nums, state.open, state.til)
+
+
+def _fits(action: GroundAction, state: State, started: bool) -> bool:
+    """Tell whether `action` can start in `state` and, if durative, end right after;
+    `started` leaves out the start condition's facts that the start itself changes."""
+    start = action.start
+    mask = ~(start.add | start.dele) if started else -1
+    if not holds(start.pre & mask, start.neg & mask, start.num_pre, state.facts, state.nums):
+        return False
+    if action.end is None:
+        return True
+    facts, nums = start.apply(state.facts, state.nums)
+    end = action.end
+    return holds(action.inv, action.inv_neg, action.inv_num, facts, nums) and holds(
+        end.pre, end.neg, end.num_pre, facts, nums
+    )
 
 
 def commit(

@@ -92,24 +92,36 @@ Event = PartialPlanFound | ModeChanged | SearchFailed | Outdated | ImprovedPlan 
 
 
 def segment(task: Task, node: Node, first: int) -> Plan:
-    """Return the actions started in `node`'s timeline from step `first` on.
+    """Return the actions started in `node`'s timeline from step `first` on, leaving out
+    the planner's internal actions (those of a disjunctive goal), as `plan_from_timeline`.
 
     Every action started in the segment ends in it when `node` has no running action.
     """
     tl = node.timeline
     ends = {s.partner: k for k, s in enumerate(tl.steps) if s.kind == END}
     out = []
-    for k in range(first, len(tl.steps)):
+    for k in _plan_steps(task, node, first):
         step = tl.steps[k]
         when = round(tl.times[k], 6)
+        name = task.actions[step.action].name
         if step.kind == INST:
-            out.append(ScheduledAction(when, task.actions[step.action].name, None))
-        elif step.kind == START:
-            end = ends[k]
-            dur = round(tl.times[end] - tl.times[k], 6)
-            out.append(ScheduledAction(when, task.actions[step.action].name, dur))
+            out.append(ScheduledAction(when, name, None))
+        else:
+            dur = round(tl.times[ends[k]] - tl.times[k], 6)
+            out.append(ScheduledAction(when, name, dur))
     out.sort(key=lambda a: a.time)
     return Plan(tuple(out))
+
+
+def _plan_steps(task: Task, node: Node, first: int) -> list[int]:
+    """Return the indexes of the timeline steps from `first` on that start a plan action
+    (ends go with their starts; internal actions are no plan's)."""
+    steps = node.timeline.steps
+    return [
+        k
+        for k in range(first, len(steps))
+        if steps[k].kind in (START, INST) and not task.actions[steps[k].action].internal
+    ]
 
 
 @dataclass
@@ -201,7 +213,7 @@ class SearchThread:
     def _stats(self, found: Round) -> RoundDone:
         size = 0
         if found.node is not None:
-            size = len(self.space.starts_after_root(found.node))
+            size = len(_plan_steps(self.task, found.node, self.space.root_steps))
         return RoundDone(
             self.rounds, found.kind, self.mode, found.expanded, found.seconds, found.best_h, size
         )
