@@ -86,38 +86,47 @@ class _Clock:
 def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | None:
     """Climb to strictly better heuristic values by breadth-first search on helpful actions.
 
-    Return a goal node, or None when a plateau cannot be escaped (the caller may fall
-    back to best-first search).
+    When the helpful actions of a plateau lead nowhere better, the breadth-first search
+    is run again on all actions before giving up. States are remembered per climb step
+    only (as in FF), so a state passed over on one step may serve a later one. Return a
+    goal node, or None when a plateau cannot be escaped (the caller may fall back to
+    best-first search).
     """
     current = root
-    seen = {root.state.key()}
     while not is_goal(ex.task, current.state):
-        queue, better = deque([current]), None
-        while queue and better is None:
-            node = queue.popleft()
-            clock.tick()
-            # Shortest partial plans first: of equally good successors, the one that
-            # runs in parallel with the plan so far wins.
-            successors = sorted(
-                ex.successors(node, helpful_only=True), key=lambda s: s[1].makespan
-            )
-            for state, timeline, running in successors:
-                if state.key() in seen:
-                    continue
-                seen.add(state.key())
-                child = ex.evaluate(state, timeline, running)
-                if ex.dead(child):
-                    continue
-                if is_goal(ex.task, state):
-                    return child
-                if child.h < current.h:
-                    better = child
-                    break
-                queue.append(child)
+        better = _climb(ex, current, clock, helpful_only=True)
+        if better is None:
+            better = _climb(ex, current, clock, helpful_only=False)
         if better is None:
             return None
         current = better
     return current
+
+
+def _climb(ex: Expander, current: Node, clock: _Clock, helpful_only: bool) -> Node | None:
+    """Breadth-first search from `current` for a goal or a node with a smaller h."""
+    seen = {current.state.key()}
+    queue = deque([current])
+    while queue:
+        node = queue.popleft()
+        clock.tick()
+        # Shortest partial plans first: of equally good successors, the one that runs
+        # in parallel with the plan so far wins.
+        successors = sorted(
+            ex.successors(node, helpful_only=helpful_only), key=lambda s: s[1].makespan
+        )
+        for state, timeline, running in successors:
+            key = state.key()
+            if key in seen:
+                continue
+            seen.add(key)
+            child = ex.evaluate(state, timeline, running)
+            if ex.dead(child):
+                continue
+            if is_goal(ex.task, state) or child.h < current.h:
+                return child
+            queue.append(child)
+    return None
 
 
 def best_first(ex: Expander, root: Node, clock: _Clock) -> Node | None:
