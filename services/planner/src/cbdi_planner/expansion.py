@@ -15,7 +15,11 @@ from cbdi_planner.state import State, apply_end, apply_start, apply_til
 from cbdi_planner.stn import END, INST, START, TIL, Future, Step, Timeline
 from cbdi_planner.task import Snap, Task
 
-__all__ = ["Expander", "Node"]
+__all__ = ["Expander", "Move", "Node", "Successor"]
+
+Running = tuple[tuple[int, int], ...]
+# A step to append, with the state after it and the actions running then.
+Placed = tuple[Step, State, Running]
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,10 +39,35 @@ class Node:
         return self.timeline.makespan
 
 
+@dataclass(frozen=True, slots=True)
+class Move:
+    """A happening applied to a node's state: the new state, and the steps to schedule.
+
+    Two steps for a compressed action (its start and end), one otherwise.
+    """
+
+    state: State
+    running: Running
+    steps: tuple[Placed, ...]
+
+    @property
+    def first(self) -> Step:
+        """Return the step that chose the move (a start, an end, an action or a literal)."""
+        return self.steps[0][0]
+
+
+Successor = tuple[State, Timeline, Running]
+
+
 class Expander:
     """Generate and evaluate successors; counts what it does in `generated`/`evaluated`."""
 
-    def __init__(self, task: Task, epsilon: float, compress: bool = False) -> None:
+    def __init__(
+        self,
+        task: Task,
+        epsilon: float,
+        compress: bool = False,
+    ) -> None:
         self.task = task
         self.epsilon = epsilon
         self.compress = compress
@@ -46,12 +75,15 @@ class Expander:
         self.generated = 0
         self.evaluated = 0
         self.inconsistent = 0
-        # Each action under the lowest fact of its start condition (-1: none), so
-        # `successors` looks only at actions whose condition can hold in a state.
+        # What an action needs before it starts: its start condition, and the part of
+        # its invariant the start does not add (the invariant holds right after it).
+        self._needs = [a.start.pre | (a.inv & ~a.start.add) for a in task.actions]
+        # Each action under the lowest fact it needs (-1: none), so `successors` looks
+        # only at actions whose condition can hold in a state.
         self._by_fact: dict[int, list[int]] = {}
         for action in task.actions:
-            pre = action.start.pre
-            low = (pre & -pre).bit_length() - 1
+            need = self._needs[action.index]
+            low = (need & -need).bit_length() - 1
             self._by_fact.setdefault(low, []).append(action.index)
         self._til_snaps = [
             Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils
@@ -61,16 +93,7 @@ class Expander:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
         if state.open:
             raise ValueError("a search root cannot have running actions")
-        estimate = self.rpg.estimate(state)
-        self.evaluated += 1
-        return Node(
-            state,
-            Timeline(epsilon=self.epsilon),
-            (),
-            estimate.value,
-            estimate.helpful,
-            estimate.duration,
-        )
+        return self.evaluate(state, Timeline(epsilon=self.epsilon), ())
 
     def evaluate(
         self, state: State, timeline: Timeline, running: tuple[tuple[int, int], ...]
@@ -80,69 +103,79 @@ class Expander:
         self.evaluated += 1
         return Node(state, timeline, running, estimate.value, estimate.helpful, estimate.duration)
 
-    def successors(
-        self, node: Node, helpful_only: bool = False
-    ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
+    def successors(self, node: Node, helpful_only: bool = False) -> Iterator[Successor]:
         """Yield the consistent successors (ends and the next timed literal first)."""
-        state, timeline, task = node.state, node.timeline, self.task
+        for move in self.moves(node, helpful_only):
+            timeline = self.schedule(node.timeline, move)
+            if timeline is not None:
+                yield move.state, timeline, move.running
+
+    def moves(self, node: Node, helpful_only: bool = False) -> Iterator[Move]:
+        """Yield the applicable happenings of a node, not yet put on its timeline.
+
+        A lazy search keeps these and schedules (`schedule`) only the ones it takes.
+        """
+        state, task, steps = node.state, self.task, len(node.timeline.steps)
         for index, start_step in node.running:
             action = task.actions[index]
             assert action.end is not None
             new = apply_end(task, state, action)
             if new is None:
                 continue
-            begun = timeline.steps[start_step]
+            begun = node.timeline.steps[start_step]
             step = Step(END, index, action.end, start_step, begun.low, begun.high)
             running = tuple(r for r in node.running if r[0] != index)
-            yield from self._extend(new, timeline, step, running)
+            yield self._move(new, running, ((step, new, running),))
         if state.til < len(task.tils):
             new = apply_til(task, state)
             if new is not None:
                 when = task.tils[state.til].time
                 step = Step(TIL, state.til, self._til_snaps[state.til], -1, when, when)
-                yield from self._extend(new, timeline, step, node.running)
-        facts = state.facts
+                yield self._move(new, node.running, ((step, new, node.running),))
+        facts, needs = state.facts, self._needs
         for index in self._candidates(node, helpful_only):
             action = task.actions[index]
-            if action.start.pre & ~facts:
+            if needs[index] & ~facts:
                 continue
-            kind = INST if action.end is None else START
             new = apply_start(task, state, action)
             if new is None:
                 continue
-            if kind == INST:
-                yield from self._extend(
-                    new, timeline, Step(INST, action.index, action.start), node.running
-                )
+            if action.end is None:
+                step = Step(INST, action.index, action.start)
+                yield self._move(new, node.running, ((step, new, node.running),))
                 continue
             low, high = action.duration_bounds(state.nums, self.epsilon)
             if low > high or high <= 0:
                 continue
             step = Step(START, action.index, action.start, -1, low, high)
-            running = (*node.running, (action.index, len(timeline.steps)))
-            if self.compress:
-                yield from self._whole(new, timeline, step, tuple(sorted(running)))
-            else:
-                yield from self._extend(new, timeline, step, tuple(sorted(running)))
-
-    def _whole(
-        self, state: State, timeline: Timeline, step: Step, running: tuple[tuple[int, int], ...]
-    ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
-        """Append a start and, at once, its end: the action as one compressed happening.
-
-        The state passes through the start's effects (its end condition and invariant
-        are checked there, as a sequential execution would); the timeline still lifts
-        the two steps into a partial order, so later actions may overlap this one.
-        """
-        action = self.task.actions[step.action]
-        assert action.end is not None
-        for started, begun, _ in self._extend(state, timeline, step, running):
-            ended = apply_end(self.task, started, action)
+            running = tuple(sorted((*node.running, (action.index, steps))))
+            if not self.compress:
+                yield self._move(new, running, ((step, new, running),))
+                continue
+            # The whole action at once: the state passes through the start's effects
+            # (the end condition and the invariant are checked there, as a sequential
+            # execution would); the timeline still lifts the two steps into a partial
+            # order, so later actions may overlap this one.
+            ended = apply_end(task, new, action)
             if ended is None:
-                return
-            rest = tuple(r for r in running if r[0] != step.action)
-            end = Step(END, step.action, action.end, len(timeline.steps), step.low, step.high)
-            yield from self._extend(ended, begun, end, rest)
+                continue
+            end = Step(END, action.index, action.end, steps, low, high)
+            placed = ((step, new, running), (end, ended, node.running))
+            yield self._move(ended, node.running, placed)
+
+    def _move(self, state: State, running: Running, steps: tuple[Placed, ...]) -> Move:
+        self.generated += 1
+        return Move(state, running, steps)
+
+    def schedule(self, timeline: Timeline, move: Move) -> Timeline | None:
+        """Return `timeline` with the steps of `move` appended (None: inconsistent)."""
+        for step, state, running in move.steps:
+            extended = timeline.extend(step, self._future(state, running))
+            if extended is None:
+                self.inconsistent += 1
+                return None
+            timeline = extended
+        return timeline
 
     def _candidates(self, node: Node, helpful_only: bool) -> list[int]:
         """Return, in index order, the actions that may start in `node` (helpful ones)."""
@@ -156,16 +189,6 @@ class Expander:
             facts ^= low
         out.sort()
         return out
-
-    def _extend(
-        self, state: State, timeline: Timeline, step: Step, running: tuple[tuple[int, int], ...]
-    ) -> Iterator[tuple[State, Timeline, tuple[tuple[int, int], ...]]]:
-        extended = timeline.extend(step, self._future(state, running))
-        self.generated += 1
-        if extended is None:
-            self.inconsistent += 1
-            return
-        yield state, extended, running
 
     def _future(self, state: State, running: tuple[tuple[int, int], ...]) -> Future:
         """Return the happenings still to come after a step: running ends, later TILs."""

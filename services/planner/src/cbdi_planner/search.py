@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 
 from cbdi_planner.compression import needs_concurrency
 from cbdi_planner.errors import SearchTimeout
-from cbdi_planner.expansion import Expander, Node
+from cbdi_planner.expansion import Expander, Move, Node
 from cbdi_planner.plan import Plan, plan_from_timeline
 from cbdi_planner.state import State, initial_state, is_goal
-from cbdi_planner.stn import END, TIL, Timeline
+from cbdi_planner.stn import END, TIL, Step
 from cbdi_planner.task import Task
 
 __all__ = ["Budget", "SearchResult", "SearchStats", "search"]
@@ -104,10 +104,16 @@ def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | No
 
 
 def _climb(ex: Expander, current: Node, clock: _Clock, helpful_only: bool) -> Node | None:
-    """Breadth-first search from `current` for a goal or a node with a smaller h."""
+    """Breadth-first search from `current` for a goal or a node with a smaller h.
+
+    Give up after `PLATEAU` expansions: a plateau that wide is best left to best-first
+    search, which keeps what it learns.
+    """
     seen = {current.state.key()}
     queue = deque([current])
-    while queue:
+    for _ in range(PLATEAU):
+        if not queue:
+            break
         node = queue.popleft()
         clock.tick()
         # Shortest partial plans first: of equally good successors, the one that runs
@@ -154,33 +160,38 @@ def best_first(ex: Expander, root: Node, clock: _Clock) -> Node | None:
         if node.h < best_h:
             best_h, boost = node.h, _BOOST
         clock.tick()
-        for succ in ex.successors(node):
-            if succ[0].key() in closed:
+        steps = len(node.timeline.steps)
+        for move in ex.moves(node):
+            if move.state.key() in closed:
                 continue
             counter += 1
-            entry = (node.h, len(succ[1].steps), counter, node, succ)
+            entry = (node.h, steps + len(move.steps), counter, node, move)
             heapq.heappush(lists[0], entry)
-            if _helpful_step(node, succ[1]):
+            if _helpful_step(node, move.first):
                 heapq.heappush(lists[1], entry)
     return None
 
 
-_Successor = tuple[State, Timeline, tuple[tuple[int, int], ...]]
-# (priority, steps, tie-break, node or parent, successor to evaluate or None)
-_Lazy = tuple[float, int, int, Node, _Successor | None]
+# (priority, steps, tie-break, node or parent, move to schedule and evaluate or None)
+_Lazy = tuple[float, int, int, Node, Move | None]
 _Entry = tuple[float, int, int, Node]
 _BOOST = 1000  # expansions on the helpful list alone after h improves
 
 
 def _take(ex: Expander, entry: _Lazy, closed: set[object]) -> Node | None:
-    """Return the node of an open-list entry, evaluating it now (None: closed or dead)."""
-    parent, succ = entry[3], entry[4]
-    if succ is None:
+    """Return the node of an open-list entry, scheduling and evaluating it now.
+
+    None: the node is closed, its timeline inconsistent or the heuristic finds it dead.
+    """
+    parent, move = entry[3], entry[4]
+    if move is None:
         return None if parent.state.key() in closed else parent
-    state, timeline, running = succ
-    if state.key() in closed:
+    if move.state.key() in closed:
         return None
-    node = ex.evaluate(state, timeline, running)
+    timeline = ex.schedule(parent.timeline, move)
+    if timeline is None:
+        return None
+    node = ex.evaluate(move.state, timeline, move.running)
     return None if ex.dead(node) else node
 
 
@@ -193,9 +204,8 @@ def _next_list(lists: tuple[list[_Lazy], list[_Lazy]], turn: int, boost: int) ->
     return turn ^ 1
 
 
-def _helpful_step(parent: Node, timeline: Timeline) -> bool:
-    """Tell whether the last step of `timeline` is helpful in `parent` (ends always are)."""
-    step = timeline.steps[-1]
+def _helpful_step(parent: Node, step: Step) -> bool:
+    """Tell whether the step that chose a move is helpful in `parent` (ends always are)."""
     return step.kind in (END, TIL) or (step.kind, step.action) in parent.helpful
 
 
@@ -350,3 +360,4 @@ def _improve(
 
 
 WEIGHTS = (2.0, 1.0)
+PLATEAU = 1000  # expansions one climbing step of enforced hill-climbing may take
