@@ -1,8 +1,8 @@
 """IPC temporal benchmarks (unmodified, from /work/shared): plans Kairos accepts.
 
-The problems listed are the first ones of each domain the planner solves within a few
-seconds; the others (elevator, the larger parking and crew-planning instances) run
-out of time and are left out, see the planner's notes on search limits.
+The problems listed are those the planner solves within about a second, from every
+domain; the slower ones are left to `make bench-planner` (elevator and depots p03 are
+in `test_compression.py`).
 """
 
 from __future__ import annotations
@@ -29,7 +29,15 @@ SOLVED = [
     ("depots", "p02"),
     ("zenotravel", "p01"),
     ("zenotravel", "p02"),
+    ("zenotravel", "p08"),
+    ("driverlog", "p08"),
+    ("matchcellar", "p03"),
+    ("parking", "p03"),
+    ("crewplanning", "p01"),
     ("crewplanning", "p02"),
+    ("crewplanning", "p03"),
+    ("crewplanning", "p04"),
+    ("crewplanning", "p05"),
 ]
 
 
