@@ -71,7 +71,7 @@ class Expander:
         self.task = task
         self.epsilon = epsilon
         self.compress = compress
-        self.rpg = RelaxedPlanGraph(task)
+        self.rpg = RelaxedPlanGraph(task, compress=compress)
         self.generated = 0
         self.evaluated = 0
         self.inconsistent = 0
