@@ -487,7 +487,7 @@ def test_required_concurrency_dead_end_is_seen_early() -> None:
     assert result.stats.expanded < 200
 
 
-@pytest.mark.parametrize("strategy", ["ehc", "bfs", "auto"])
+@pytest.mark.parametrize("strategy", ["ehc", "bfs", "ff", "auto"])
 def test_strategies_agree_on_validity(tmp_path: Path, strategy: str) -> None:
     planned = plan_and_validate(
         tmp_path, DURATIVE, DURATIVE_PROBLEM, strategy=strategy, name=strategy

@@ -1,6 +1,6 @@
 """`cbdi-planner`: plan a PDDL 2.1 problem, validate a plan, or serve an agent's planner.
 
-    cbdi-planner plan DOMAIN PROBLEM [--timeout S] [--search ehc|bfs|auto] [--anytime] [--json]
+    cbdi-planner plan DOMAIN PROBLEM [--timeout S] [--search auto|ff|ehc|bfs] [--anytime] [--json]
     cbdi-planner validate DOMAIN PROBLEM PLAN
     cbdi-planner serve --agent NAME --agent-file FILE ...     (the planner service)
     cbdi plan ...                                              (the same as `cbdi-planner plan`)
@@ -93,7 +93,12 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("problem")
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds (default 60)")
     parser.add_argument("--expansions", type=int, default=None, help="node expansion budget")
-    parser.add_argument("--search", choices=STRATEGIES, default="auto")
+    parser.add_argument(
+        "--search",
+        choices=STRATEGIES,
+        default="auto",
+        help="auto: goal agenda, then ff; ff: hill-climbing, then best-first (default auto)",
+    )
     parser.add_argument(
         "--compress",
         choices=("auto", "yes", "no"),

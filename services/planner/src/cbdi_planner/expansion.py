@@ -11,7 +11,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
-from cbdi_planner.state import State, apply_end, apply_start, apply_til
+from cbdi_planner.state import State, apply_end, apply_start, apply_til, is_goal
 from cbdi_planner.stn import END, INST, START, TIL, Future, Step, Timeline
 from cbdi_planner.task import Snap, Task
 
@@ -72,6 +72,7 @@ class Expander:
         self.epsilon = epsilon
         self.compress = compress
         self.rpg = RelaxedPlanGraph(task, compress=compress)
+        self.subgoal: int | None = None
         self.generated = 0
         self.evaluated = 0
         self.inconsistent = 0
@@ -94,6 +95,17 @@ class Expander:
         if state.open:
             raise ValueError("a search root cannot have running actions")
         return self.evaluate(state, Timeline(epsilon=self.epsilon), ())
+
+    def aim(self, subgoal: int | None) -> None:
+        """Search for the facts `subgoal` only (a stage of a goal agenda); None: the goal."""
+        self.subgoal = subgoal
+        self.rpg.aim(self.task.goal if subgoal is None else subgoal)
+
+    def reached(self, state: State) -> bool:
+        """Tell whether `state` is a goal of the current aim (no action may still run)."""
+        if self.subgoal is None:
+            return is_goal(self.task, state)
+        return not state.open and self.subgoal & ~state.facts == 0
 
     def evaluate(
         self, state: State, timeline: Timeline, running: tuple[tuple[int, int], ...]

@@ -215,6 +215,18 @@ class RelaxedPlanGraph:
         low, _ = action.duration_bounds(self.task.init_nums, 0.0)
         return low if math.isfinite(low) else 0.0
 
+    def aim(self, goal: int) -> None:
+        """Estimate the distance to the facts `goal` from now on (the task's by default)."""
+        self.goal = _bits(goal)
+
+    def levels(self, state: State, facts: int) -> dict[int, int] | None:
+        """Return the first layer of each of `facts` in the graph of `state` (None: one never)."""
+        wanted = list(_bits(facts))
+        reached = self._explore(state, wanted)
+        if reached is None:
+            return None
+        return {f: reached[0][f] for f in wanted}
+
     def estimate(self, state: State) -> Estimate:
         """Return the relaxed plan length and the helpful happenings of `state`."""
         goals = list(self.goal) + [self.ended + a for a in state.open]

@@ -1,9 +1,12 @@
-"""Forward search over snap actions: enforced hill-climbing and greedy best-first search.
+"""Forward search over snap (or whole, compressed) actions.
 
-`auto` runs enforced hill-climbing with helpful actions first (fast, incomplete) and
-falls back to complete best-first search if it gets stuck, as FF and JavaFF do. The
-anytime mode then keeps searching for plans with a shorter makespan, by weighted A* on
-makespan with branch-and-bound pruning.
+`auto` first reaches the goal facts one at a time (a goal agenda, nearest first, each
+stage by enforced hill-climbing); if a stage gets stuck, `ff` follows: enforced
+hill-climbing with helpful actions for the whole goal (fast, incomplete), falling back
+to complete lazy best-first search, as FF and JavaFF do. `ehc` and `bfs` run one of
+them alone. The anytime mode then keeps searching for plans with a shorter makespan:
+after an agenda's plan, climbing to the whole goal; then weighted A* on makespan with
+branch-and-bound pruning.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from cbdi_planner.task import Task
 
 __all__ = ["Budget", "SearchResult", "SearchStats", "search"]
 
-STRATEGIES = ("ehc", "bfs", "auto")
+STRATEGIES = ("auto", "ff", "ehc", "bfs")
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,7 +96,7 @@ def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | No
     best-first search).
     """
     current = root
-    while not is_goal(ex.task, current.state):
+    while not ex.reached(current.state):
         better = _climb(ex, current, clock, helpful_only=True)
         if better is None:
             better = _climb(ex, current, clock, helpful_only=False)
@@ -129,7 +132,7 @@ def _climb(ex: Expander, current: Node, clock: _Clock, helpful_only: bool) -> No
             child = ex.evaluate(state, timeline, running)
             if ex.dead(child):
                 continue
-            if is_goal(ex.task, state) or child.h < current.h:
+            if ex.reached(state) or child.h < current.h:
                 return child
             queue.append(child)
     return None
@@ -155,7 +158,7 @@ def best_first(ex: Expander, root: Node, clock: _Clock) -> Node | None:
         if node is None:
             continue
         closed.add(node.state.key())
-        if is_goal(ex.task, node.state):
+        if ex.reached(node.state):
             return node
         if node.h < best_h:
             best_h, boost = node.h, _BOOST
@@ -240,7 +243,7 @@ def improving(
             child = ex.evaluate(state, timeline, running)
             if ex.dead(child):
                 continue
-            if is_goal(ex.task, state):
+            if ex.reached(state):
                 bound = span
                 yield child
                 if later:
@@ -316,10 +319,46 @@ def search(
     return result
 
 
+def goal_agenda(ex: Expander, root: Node, clock: _Clock) -> Node | None:
+    """Reach the goal facts one at a time, nearest first, by enforced hill-climbing.
+
+    Each stage aims at the goals reached so far plus the one whose relaxed planning
+    graph layer is lowest now, and continues the plan of the stage before; goals a
+    stage reaches by the way count as reached. The last stage aims at the whole goal
+    (with its negative and numeric parts). Each relaxed plan is then small and cheap:
+    the graph stops at the stage's goals. None when a stage gets stuck (the caller
+    searches for the whole goal at once instead) or the goal has fewer than two facts
+    left to reach.
+    """
+    goal = ex.task.goal
+    if (goal & ~root.state.facts).bit_count() < 2:
+        return None
+    node: Node | None = root
+    try:
+        while node is not None and not is_goal(ex.task, node.state):
+            remaining = goal & ~node.state.facts
+            levels = ex.rpg.levels(node.state, remaining) if remaining else {}
+            if levels is None:
+                return None
+            nearest = min(levels, key=lambda f: (levels[f], f)) if levels else -1
+            rest = remaining & ~(1 << nearest) if nearest >= 0 else 0
+            ex.aim((goal & node.state.facts) | (1 << nearest) if rest else None)
+            start = ex.evaluate(node.state, node.timeline, node.running)
+            node = None if ex.dead(start) else enforced_hill_climbing(ex, start, clock)
+        return node
+    finally:
+        ex.aim(None)
+
+
 def _first_plan(
     ex: Expander, root: Node, clock: _Clock, strategy: str, stats: SearchStats
 ) -> Node | None:
-    if strategy in ("ehc", "auto"):
+    if strategy == "auto":
+        goal = goal_agenda(ex, root, clock)
+        if goal is not None:
+            stats.strategy = "goals"
+            return goal
+    if strategy in ("ehc", "ff", "auto"):
         goal = enforced_hill_climbing(ex, root, clock)
         if goal is not None or strategy == "ehc":
             stats.strategy = "ehc"
@@ -355,6 +394,12 @@ def _improve(
 ) -> None:
     """Search for plans shorter than the best so far until the budget runs out."""
     assert result.plan is not None
+    if result.stats.strategy == "goals":
+        # The agenda is fast but myopic: climbing to the whole goal at once often
+        # finds a much shorter plan, a good bound for what follows.
+        goal = enforced_hill_climbing(ex, root, clock)
+        if goal is not None:
+            _record(ex.task, goal, result, clock, on_plan)
     for goal in improving(ex, root, clock, result.plan.makespan, WEIGHTS):
         _record(ex.task, goal, result, clock, on_plan)
 

@@ -28,7 +28,9 @@ def plan_with(
 ) -> Plan:
     """Return a plan for `problem` from `backend` within `seconds`."""
     if backend == "cbdi":
-        result = search(ground(domain, problem), budget=Budget(max_seconds=seconds))
+        # FF's search (climbing, then best-first), not the goal agenda: the agent acts on
+        # this first plan, and climbing to the whole goal gives shorter plans.
+        result = search(ground(domain, problem), strategy="ff", budget=Budget(max_seconds=seconds))
         if result.plan is not None:
             return result.plan
         if result.status == "timeout":
