@@ -6,8 +6,8 @@ For each problem it measures, in one process on one core:
   `--plan-size` actions, each round's partial plan appended to the ones before (as an
   executing agent would receive them); the time to the first partial plan, to the
   complete plan, and the makespan of the concatenated plan;
-- offline: one search for a complete plan (`--strategy`, default auto: greedy, then
-  complete), its time and makespan;
+- offline: one search for a complete plan (`--strategy`, default auto: the goal agenda,
+  then climbing, then complete best-first), its time and makespan;
 
 and validates every plan with our simulator and, if installed, with `kairos validate`.
 
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds per search")
     parser.add_argument("--round", type=float, default=0.1, help="round interval (s)")
     parser.add_argument("--plan-size", type=int, default=8, help="actions per partial plan")
-    parser.add_argument("--strategy", default="auto", help="offline search: ehc, bfs, auto")
+    parser.add_argument("--strategy", default="auto", help="offline search: auto, ff, ehc, bfs")
     parser.add_argument("--csv", type=Path, help="also write the rows to this CSV file")
     args = parser.parse_args(argv)
     rows = []
