@@ -16,7 +16,7 @@ rejects counts as unsolved and is flagged. Makespans are the validator's. The IP
 score of a run is the best makespan either planner found over its own (0 if unsolved).
 
     .venv/bin/python benchmarks/planner.py [--timeout 60] [--only REGEX]
-        [--planners cbdi,kairos] [--jobs 1] [--suite DIR] [--csv PATH]
+        [--planners cbdi,kairos] [--jobs 1] [--suite DIR] [--csv PATH] [--reuse CSV]
 
 Prints a table and a summary against issue 3's targets and writes the table as CSV
 (default `benchmarks/results/planner.csv`; plans go to `plans/` next to it).
@@ -446,6 +446,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         for future in futures:
             results.append(future.result())
             _progress(results[-1])
+    if args.reuse:
+        results += reuse(Path(args.reuse), todo, planners)
+        planners += sorted({r.planner for r in results} - set(planners))
+        order = {p.key: i for i, p in enumerate(todo)}
+        results.sort(key=lambda r: (order[r.problem.key], PLANNERS.index(r.planner)))
     rows = write_csv(results, Path(args.csv))
     print("\n" + table(rows) + "\n")
     print(summary(results, planners, args.timeout))
@@ -461,6 +466,40 @@ def _progress(result: Result) -> None:
         f"{r['status']}",
         flush=True,
     )
+
+
+def reuse(path: Path, todo: Sequence[Problem], skip: Sequence[str]) -> list[Result]:
+    """Read back the runs of an earlier CSV, except those of planners in `skip`.
+
+    Only problems in `todo` are kept; a run keeps its first and best plans (time and
+    makespan), its verdict and its status, which is all scoring and the summary read.
+    """
+    by_key = {p.key: p for p in todo}
+    out = []
+    with path.open(newline="", encoding="utf-8") as handle:
+        for r in csv.DictReader(handle):
+            problem = by_key.get(f"{r['suite']}/{r['domain']}/{r['problem']}")
+            if problem is None or r["planner"] in skip or r["planner"] not in PLANNERS:
+                continue
+            found = tuple(
+                Found(float(r[f"{k}_time"]), float(r[f"{k}_makespan"] or r["best_makespan"]))
+                for k in ("first", "best")
+                if r[f"{k}_time"]
+            )
+            solved = r["solved"] == "yes"
+            outcome = Outcome(r["status"], int(r["exit"] or 0), float(r["wall"] or 0), found, None)
+            out.append(
+                Result(
+                    problem,
+                    r["planner"],
+                    outcome,
+                    valid=solved,
+                    makespan=float(r["best_makespan"]) if solved else None,
+                    moves=int(r["moves"]) if r["moves"] else None,
+                    note=f"from {path.name}",
+                )
+            )
+    return out
 
 
 def write_csv(results: Sequence[Result], path: Path) -> list[dict[str, str]]:
@@ -492,6 +531,12 @@ def _parser() -> argparse.ArgumentParser:
         help="IPC temporal problems: DOMAIN/domain.pddl and DOMAIN/pNN.pddl",
     )
     parser.add_argument("--csv", default=str(DEFAULT_CSV), help="where to write the table")
+    parser.add_argument(
+        "--reuse",
+        default="",
+        help="an earlier CSV: its runs of the planners not run now join the table and "
+        "the scores (e.g. re-measure cbdi against a kairos run kept from before)",
+    )
     return parser
 
 

@@ -157,3 +157,19 @@ def test_judge_accepts_kairos_own_plan_with_the_validators_makespan(tmp_path: Pa
     assert result.solved and result.makespan is not None
     assert result.makespan == pytest.approx(outcome.found[-1].makespan, abs=1e-3)
     assert result.moves is not None and result.moves >= 22
+
+
+def test_reuse_reads_back_the_other_planners_runs_for_scoring(tmp_path: Path) -> None:
+    solved, unsolved = _result("p1", "kairos", 10.0), _result("p2", "kairos", None)
+    mine = _result("p1", "cbdi", 20.0)
+    path = tmp_path / "old.csv"
+    bench.write_csv([solved, unsolved, mine], path)
+    todo = [solved.problem, unsolved.problem]
+    back = bench.reuse(path, todo, ["cbdi"])
+    assert [(r.problem.key, r.planner, r.solved) for r in back] == [
+        ("ipc/d/p1", "kairos", True),
+        ("ipc/d/p2", "kairos", False),
+    ]
+    assert back[0].makespan == 10.0 and back[0].outcome.found[0] == bench.Found(1.0, 20.0)
+    assert bench.qualities([mine, *back])[("ipc/d/p1", "cbdi")] == 0.5
+    assert bench.reuse(path, todo[1:], ["cbdi"])[0].problem.key == "ipc/d/p2"  # only todo
