@@ -12,6 +12,7 @@ branch-and-bound pruning.
 from __future__ import annotations
 
 import heapq
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -138,8 +139,17 @@ def _climb(ex: Expander, current: Node, clock: _Clock, helpful_only: bool) -> No
     return None
 
 
-def best_first(ex: Expander, root: Node, clock: _Clock) -> Node | None:
+def best_first(
+    ex: Expander,
+    root: Node,
+    clock: _Clock,
+    bound: float = math.inf,
+    limit: int | None = None,
+) -> Node | None:
     """Run greedy best-first search on h (ties: fewer steps); None if exhausted.
+
+    Partial plans as long as `bound` are pruned; `limit` caps the expansions (None
+    when reached, as when exhausted).
 
     Evaluation is deferred: a successor waits in the open list with its parent's h and
     is evaluated only when taken out, so the heuristic runs once per expanded node
@@ -155,13 +165,17 @@ def best_first(ex: Expander, root: Node, clock: _Clock) -> Node | None:
         turn = _next_list(lists, turn, boost)
         boost = max(0, boost - 1)
         node = _take(ex, heapq.heappop(lists[turn]), closed)
-        if node is None:
+        if node is None or node.makespan >= bound - 1e-9:
             continue
         closed.add(node.state.key())
         if ex.reached(node.state):
             return node
         if node.h < best_h:
             best_h, boost = node.h, _BOOST
+        if limit is not None:
+            if limit <= 0:
+                return None
+            limit -= 1
         clock.tick()
         steps = len(node.timeline.steps)
         for move in ex.moves(node):
@@ -400,9 +414,15 @@ def _improve(
         goal = enforced_hill_climbing(ex, root, clock)
         if goal is not None:
             _record(ex.task, goal, result, clock, on_plan)
+    # Greedy best-first search below the best makespan so far, again and again while
+    # it finds plans within its expansion limit: climbing's first plans can be long,
+    # and this finds a much shorter one fast on many tasks (driverlog p08: 211 -> 101).
+    while (goal := best_first(ex, root, clock, result.plan.makespan, IMPROVE_LIMIT)) is not None:
+        _record(ex.task, goal, result, clock, on_plan)
     for goal in improving(ex, root, clock, result.plan.makespan, WEIGHTS):
         _record(ex.task, goal, result, clock, on_plan)
 
 
 WEIGHTS = (2.0, 1.0)
+IMPROVE_LIMIT = 5000  # expansions of one bounded greedy search for a shorter plan
 PLATEAU = 1000  # expansions one climbing step of enforced hill-climbing may take
