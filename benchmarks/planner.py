@@ -447,9 +447,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             results.append(future.result())
             _progress(results[-1])
     if args.reuse:
-        results += reuse(Path(args.reuse), todo, planners)
+        # Every problem of the suite, so that `--only` re-runs part of an earlier table.
+        everything = problems(suite if suite.is_dir() else None)
+        results += reuse(Path(args.reuse), everything, {(p.key, pl) for p, pl in tasks})
         planners += sorted({r.planner for r in results} - set(planners))
-        order = {p.key: i for i, p in enumerate(todo)}
+        order = {p.key: i for i, p in enumerate(everything)}
         results.sort(key=lambda r: (order[r.problem.key], PLANNERS.index(r.planner)))
     rows = write_csv(results, Path(args.csv))
     print("\n" + table(rows) + "\n")
@@ -468,18 +470,23 @@ def _progress(result: Result) -> None:
     )
 
 
-def reuse(path: Path, todo: Sequence[Problem], skip: Sequence[str]) -> list[Result]:
-    """Read back the runs of an earlier CSV, except those of planners in `skip`.
+def reuse(
+    path: Path, todo: Sequence[Problem], skip: Sequence[str] | set[tuple[str, str]]
+) -> list[Result]:
+    """Read back the runs of an earlier CSV, except those redone now (`skip`).
 
-    Only problems in `todo` are kept; a run keeps its first and best plans (time and
-    makespan), its verdict and its status, which is all scoring and the summary read.
+    `skip` holds planners, or `(problem key, planner)` pairs. Only problems in `todo`
+    are kept; a run keeps its first and best plans (time and makespan), its verdict
+    and its status, which is all scoring and the summary read.
     """
     by_key = {p.key: p for p in todo}
     out = []
     with path.open(newline="", encoding="utf-8") as handle:
         for r in csv.DictReader(handle):
-            problem = by_key.get(f"{r['suite']}/{r['domain']}/{r['problem']}")
-            if problem is None or r["planner"] in skip or r["planner"] not in PLANNERS:
+            key = f"{r['suite']}/{r['domain']}/{r['problem']}"
+            problem, planner = by_key.get(key), r["planner"]
+            redone = planner in skip or (key, planner) in skip
+            if problem is None or redone or planner not in PLANNERS:
                 continue
             found = tuple(
                 Found(float(r[f"{k}_time"]), float(r[f"{k}_makespan"] or r["best_makespan"]))
@@ -534,8 +541,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--reuse",
         default="",
-        help="an earlier CSV: its runs of the planners not run now join the table and "
-        "the scores (e.g. re-measure cbdi against a kairos run kept from before)",
+        help="an earlier CSV: its runs not redone now join the table and the scores "
+        "(re-measure cbdi against a kept kairos run, or re-run part of a table with --only)",
     )
     return parser
 

@@ -173,3 +173,15 @@ def test_reuse_reads_back_the_other_planners_runs_for_scoring(tmp_path: Path) ->
     assert back[0].makespan == 10.0 and back[0].outcome.found[0] == bench.Found(1.0, 20.0)
     assert bench.qualities([mine, *back])[("ipc/d/p1", "cbdi")] == 0.5
     assert bench.reuse(path, todo[1:], ["cbdi"])[0].problem.key == "ipc/d/p2"  # only todo
+
+
+def test_reuse_skips_only_the_runs_redone_now(tmp_path: Path) -> None:
+    runs = [_result(p, pl, 10.0) for p in ("p1", "p2") for pl in ("cbdi", "kairos")]
+    path = tmp_path / "old.csv"
+    bench.write_csv(runs, path)
+    back = bench.reuse(path, [r.problem for r in runs], {("ipc/d/p1", "cbdi")})
+    assert [(r.problem.name, r.planner) for r in back] == [
+        ("p1", "kairos"),
+        ("p2", "cbdi"),
+        ("p2", "kairos"),
+    ]
