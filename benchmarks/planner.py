@@ -272,16 +272,24 @@ def summary(results: Sequence[Result], planners: Sequence[str], timeout: float) 
             for p in planners
         )
         lines.append(f"solved with valid plans, {suite}: {counts}")
-    score = {p: sum(v for (_, planner), v in q.items() if planner == p) for p in planners}
-    lines.append("IPC quality score: " + ", ".join(f"{p} {s:.2f}" for p, s in score.items()))
+    suite_of = {r.problem.key: r.problem.suite for r in results}
+    for suite in sorted(set(suite_of.values())):
+        score = {
+            p: sum(v for (key, pl), v in q.items() if pl == p and suite_of[key] == suite)
+            for p in planners
+        }
+        lines.append(
+            f"quality score (IPC), {suite}: " + ", ".join(f"{p} {s:.2f}" for p, s in score.items())
+        )
+        ours, theirs = PLANNERS
+        if set(PLANNERS) <= set(planners) and score[theirs]:
+            ratio = score[ours] / score[theirs]
+            target = (
+                f" (target >= 0.9: {'met' if ratio >= 0.9 else 'missed'})" if suite == "ipc" else ""
+            )
+            lines.append(f"quality ours/kairos, {suite}: {ratio:.3f}{target}")
     if set(PLANNERS) <= set(planners):
         ours, theirs = PLANNERS
-        if score[theirs]:
-            ratio = score[ours] / score[theirs]
-            lines.append(
-                f"quality ours/kairos: {ratio:.3f} (target >= 0.9: "
-                f"{'met' if ratio >= 0.9 else 'missed'})"
-            )
         ratios = time_ratios(results, ours, theirs)
         mean = geometric_mean(ratios)
         if mean is not None:
