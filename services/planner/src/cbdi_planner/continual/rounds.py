@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from cbdi_planner.expansion import Expander, Node
 from cbdi_planner.state import State, is_goal
-from cbdi_planner.stn import END, START
+from cbdi_planner.stn import END
 from cbdi_planner.task import Task
 
 __all__ = ["NG", "G", "Round", "RoundBound", "SearchSpace"]
@@ -212,12 +212,3 @@ class SearchSpace:
     def new_steps(self, node: Node) -> range:
         """Return the indexes of `node`'s timeline steps after the root (its new plan)."""
         return range(self.root_steps, len(node.timeline.steps))
-
-    def starts_after_root(self, node: Node) -> list[int]:
-        """Return the timeline indexes of actions started after the root."""
-        return [k for k in self.new_steps(node) if node.timeline.steps[k].kind != END]
-
-    @staticmethod
-    def is_start(node: Node, k: int) -> bool:
-        """Tell whether step `k` starts a durative action."""
-        return node.timeline.steps[k].kind == START
