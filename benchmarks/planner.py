@@ -441,6 +441,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     todo = [p for p in problems(suite if suite.is_dir() else None) if re.search(args.only, p.key)]
     tasks = [(p, planner) for p in todo for planner in planners]
+    # Every problem of the suite, so that `--only` re-runs part of an earlier table. The
+    # earlier CSV is read first: a bad one is reported before an hour of runs, not after.
+    everything = problems(suite if suite.is_dir() else None)
+    reused: list[Result] = []
+    if args.reuse:
+        try:
+            reused = reuse(Path(args.reuse), everything, {(p.key, pl) for p, pl in tasks})
+        except (OSError, KeyError, ValueError) as exc:
+            print(
+                f"--reuse {args.reuse}: not a CSV this benchmark wrote ({exc!r})", file=sys.stderr
+            )
+            return 2
     load = os.getloadavg()[0]
     print(
         f"{len(todo)} problems x {len(planners)} planners, {args.timeout:g} s each, "
@@ -454,11 +466,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         for future in futures:
             results.append(future.result())
             _progress(results[-1])
-    if args.reuse:
-        # Every problem of the suite, so that `--only` re-runs part of an earlier table.
-        everything = problems(suite if suite.is_dir() else None)
-        results += reuse(Path(args.reuse), everything, {(p.key, pl) for p, pl in tasks})
-        planners += sorted({r.planner for r in results} - set(planners))
+    if reused:
+        results += reused
+        planners += sorted({r.planner for r in reused} - set(planners))
         order = {p.key: i for i, p in enumerate(everything)}
         results.sort(key=lambda r: (order[r.problem.key], PLANNERS.index(r.planner)))
     rows = write_csv(results, Path(args.csv))

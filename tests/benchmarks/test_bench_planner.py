@@ -185,3 +185,22 @@ def test_reuse_skips_only_the_runs_redone_now(tmp_path: Path) -> None:
         ("p2", "cbdi"),
         ("p2", "kairos"),
     ]
+
+
+@pytest.mark.parametrize("content", [None, "not,a,table\n1,2,3\n"])
+def test_a_bad_reuse_file_is_reported_before_any_run(tmp_path: Path, content: str | None) -> None:
+    path = tmp_path / "old.csv"
+    if content is not None:
+        path.write_text(content)
+    argv = [
+        "--planners",
+        "cbdi",
+        "--only",
+        "^$",
+        "--reuse",
+        str(path),
+        "--csv",
+        str(tmp_path / "o"),
+    ]
+    assert bench.main(argv) == 2
+    assert not (tmp_path / "o").exists()
