@@ -7,6 +7,7 @@ planner needs the domain and the `[planning]` settings. Both read the file here,
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -42,6 +43,9 @@ class PlanningSettings:
     empty_rounds: int = 10
     backend: str = "cbdi"
     timeout: float = 30.0
+    # Virtual time (lockstep): node expansions per simulated second of planning. The
+    # planner gets this many per second of each epoch, online and offline alike.
+    planning_speed: float = 1000.0
 
 
 @dataclass(frozen=True)
@@ -99,6 +103,10 @@ def _planning(table: Any, source: str) -> PlanningSettings:
             )
         values[key] = value
     settings = PlanningSettings(**values)
+    if not (math.isfinite(settings.planning_speed) and settings.planning_speed > 0):
+        raise AgentFileError(
+            source, "planning.planning_speed", "expected a finite number of expansions above 0"
+        )
     if settings.mode not in MODES:
         raise AgentFileError(source, "planning.mode", f"expected one of {', '.join(MODES)}")
     return settings

@@ -30,9 +30,12 @@ __all__ = [
     "alive",
     "component_rpc",
     "describe",
+    "epoch_ack",
+    "epoch_ack_all",
     "errors",
     "executor_arrested",
     "executor_status",
+    "member",
     "monitor_stream",
     "planner_forecasts",
     "planner_plans",
@@ -191,6 +194,21 @@ def agent_ack(agent: str) -> str:
 def agent_ack_all() -> str:
     """Return the key expression matching every agent's epoch acknowledgements."""
     return agent_stream("*", "executor", "ack")
+
+
+def epoch_ack(agent: str, component: str) -> str:
+    """Return the key on which one component of `agent` acknowledges epochs (lockstep)."""
+    return agent_stream(agent, component, "ack")
+
+
+def epoch_ack_all(agent: str = "*") -> str:
+    """Return the key expression matching every component's acks (of one agent or all)."""
+    return agent_stream(agent, "*", "ack")
+
+
+def member(agent: str, component: str) -> str:
+    """Return the lockstep member name `agent/component` (the service id)."""
+    return service_id(component, agent)
 
 
 def monitor_stream(stream: str) -> str:

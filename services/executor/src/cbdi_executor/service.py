@@ -15,19 +15,29 @@ from dataclasses import dataclass, field
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, from_wire
-from cbdi.bus import inputs, publish, request
+from cbdi.bus import publish, request, sequenced_inputs
+from cbdi.bus.typed import Stamped
 from cbdi.clock import SimClock
 from cbdi.errors import CbdiError
+from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import BeliefsUpdate, EarlyArrest, PartialPlan
 from cbdi.wire.base import Message
-from cbdi.wire.world import ActionOutcome, ActionReply, EpochAck, Tick
+from cbdi.wire.world import ActionOutcome, ActionReply, EpochAck, Percepts, Tick
 from cbdi_executor.dispatcher import Dispatcher, Effects
 
 __all__ = ["ExecutorService", "ExecutorSettings", "executor_main"]
 
-INPUTS: tuple[type[Message], ...] = (Tick, BeliefsUpdate, PartialPlan, EarlyArrest, ActionOutcome)
+INPUTS: tuple[type[Message], ...] = (
+    Tick,
+    BeliefsUpdate,
+    PartialPlan,
+    EarlyArrest,
+    ActionOutcome,
+    Percepts,
+    EpochAck,
+)
 
 
 @dataclass(frozen=True)
@@ -35,12 +45,15 @@ class ExecutorSettings(ServiceSettings):
     """Settings of `cbdi-executor`."""
 
     agent: str = field(default="robot1", metadata={"help": "the agent this executor serves"})
+    ack_timeout: float = field(
+        default=30.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
+    )
 
 
 class ExecutorService:
     """One agent's executor on the bus."""
 
-    def __init__(self, ctx: ServiceContext, agent: str) -> None:
+    def __init__(self, ctx: ServiceContext, agent: str, ack_timeout: float = 30.0) -> None:
         self.ctx, self.agent = ctx, agent
         self.dispatcher = Dispatcher(agent)
         self.clock = SimClock()
@@ -48,21 +61,46 @@ class ExecutorService:
         self.beliefs_epoch = -1
         self.outcome_epoch = -1
         self.acked = -1
+        self.ack_timeout = ack_timeout
+        self.lockstep = Lockstep(
+            self.input_keys(), lambda first: ctx.start(self.epochs(first), name="epochs")
+        )
 
     def input_keys(self) -> list[str]:
         a = self.agent
         return [
             keys.world_stream("clock"),
-            keys.world_outcomes(a),
+            keys.world_for_agent(a),  # outcomes, then percepts: the world's epoch is out
             keys.scheduler_plans(a),
             keys.scheduler_arrest(a),
             keys.scheduler_beliefs(a),
+            keys.epoch_ack(a, "scheduler"),
         ]
 
-    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
-        """Handle every input in arrival order (one task: no races between inputs)."""
-        async for _, msg in stream:
-            await self.handle(msg)
+    async def run(self, stream: AsyncIterator[Stamped]) -> None:
+        """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""
+        async for item in stream:
+            for _, m in await self.lockstep.put(item):
+                if not isinstance(m, EpochAck | Percepts):
+                    await self.handle(m)
+                    await self.maybe_ack()
+
+    async def epochs(self, first: int) -> None:
+        """Lockstep: the executor's part of each epoch, once the scheduler's is done."""
+        scheduler = keys.member(self.agent, "scheduler")
+        epoch = first
+        while True:
+            needs = [Need(WORLD, epoch), Need(scheduler, epoch)]
+            released = await self.lockstep.gate.wait(needs, self.ack_timeout)
+            if released.late:
+                self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
+            for _, msg in released.messages:
+                if not isinstance(msg, EpochAck | Percepts):
+                    await self.handle(msg)
+            await self.step()
+            self.acked = epoch
+            await send_ack(self.ctx.bus, self.agent, "executor", epoch)
+            epoch += 1
 
     async def handle(self, msg: Message) -> None:
         now = self.clock.now()
@@ -84,7 +122,6 @@ class ExecutorService:
             self.clock.on_tick(msg.epoch, msg.time)
             await self.send(self.dispatcher.on_outcome(msg, self.clock.now()))
             await self.step()
-        await self.maybe_ack()
 
     def current(self) -> bool:
         """Whether the beliefs are as new as everything the world told us (clock, outcomes).
@@ -145,8 +182,10 @@ def executor_main(settings: ExecutorSettings) -> ServiceMain:
     """Return the service body of one executor."""
 
     async def body(ctx: ServiceContext) -> None:
-        service = ExecutorService(ctx, settings.agent)
-        stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+        service = ExecutorService(ctx, settings.agent, settings.ack_timeout)
+        stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         ctx.start(service.run(stream), name="executor")
+        ready = announce_ready(ctx.bus, settings.agent, "executor", service.lockstep.decided)
+        ctx.start(ready, name="ready")
 
     return body

@@ -16,8 +16,10 @@ from msgspec.structs import replace
 
 from cbdi import keys
 from cbdi.beliefs import to_wire
-from cbdi.bus import inputs, publish, serve
+from cbdi.bus import publish, sequenced_inputs, serve
+from cbdi.bus.typed import Stamped
 from cbdi.errors import CbdiError
+from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
@@ -31,7 +33,7 @@ from cbdi.wire.agent import (
 )
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
-from cbdi.wire.world import ActionOutcome, Percepts
+from cbdi.wire.world import ActionOutcome, EpochAck, Percepts, Tick
 from cbdi_scheduler.events import map_beliefs
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
@@ -47,6 +49,8 @@ INPUTS: tuple[type[Message], ...] = (
     ActionStatus,
     ArrestReport,
     Claim,
+    EpochAck,
+    Tick,
 )
 
 
@@ -57,26 +61,39 @@ class SchedulerSettings(ServiceSettings):
     agent: str = field(default="robot1", metadata={"help": "the agent's name"})
     agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
     load_map: bool = field(default=True, metadata={"help": "ask the world for its map first"})
+    ack_timeout: float = field(
+        default=30.0, metadata={"help": "lockstep: seconds to wait for the planner's epoch"}
+    )
 
 
 class SchedulerService:
     """The mind of one agent on the bus."""
 
-    def __init__(self, ctx: ServiceContext, mind: Mind) -> None:
+    def __init__(self, ctx: ServiceContext, mind: Mind, ack_timeout: float = 30.0) -> None:
         self.ctx, self.mind, self.agent = ctx, mind, mind.agent
         self.search_ids = count(1)
         self.search_id = ""
         self.last_search: SearchRequest | None = None  # resent when the planner (re)appears
+        self.ack_timeout = ack_timeout
+        self.members: list[str] = []  # the world's lockstep members (from its info)
+        self.lockstep = Lockstep(
+            self.input_keys(), lambda first: ctx.start(self.epochs(first), name="epochs")
+        )
 
     def input_keys(self) -> list[str]:
         a = self.agent
+        claims = self.mind.claims is not None
         return [
+            keys.world_stream("clock"),
             keys.world_for_agent(a),  # percepts and action outcomes, in order
             keys.planner_plans(a),
             keys.planner_status(a),
             keys.executor_status(a),
             keys.executor_arrested(a),
-            *([keys.scheduler_claims_all()] if self.mind.claims is not None else []),
+            *([keys.scheduler_claims_all()] if claims else []),
+            keys.epoch_ack(a, "executor"),
+            keys.epoch_ack(a, "planner"),
+            *([keys.epoch_ack("*", "scheduler")] if claims else []),
         ]
 
     async def load_map(self) -> None:
@@ -87,18 +104,62 @@ class SchedulerService:
             self.ctx.log.warning("no_map", error=str(exc) or "the world did not answer")
             return
         self.mind.beliefs = self.mind.beliefs.adding(map_beliefs(info))
+        self.members = list(info.members)
         self.ctx.log.info("map_loaded", map=info.map_name, cells=info.width * info.height)
 
-    async def run(self, stream: AsyncIterator[tuple[str, Message]], load_map: bool) -> None:
-        """Handle every input in arrival order (one task: no races between inputs)."""
+    async def run(self, stream: AsyncIterator[Stamped], load_map: bool) -> None:
+        """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""
         if load_map:
             await self.load_map()  # inputs wait in the stream meanwhile
-        async for _, msg in stream:
-            reaction = self.react(msg)
-            if isinstance(msg, Percepts):  # beliefs first: the planner plans from them
-                update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
-                await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
-            await self.act(reaction)
+        # Ready (the start barrier) only now that we know the world's map and members.
+        ready = announce_ready(self.ctx.bus, self.agent, "scheduler", self.lockstep.decided)
+        self.ctx.start(ready, name="ready")
+        async for item in stream:
+            for _, m in await self.lockstep.put(item):
+                await self.on_message(m)
+
+    async def on_message(self, msg: Message) -> None:
+        """React to one input and publish what follows (beliefs first after percepts)."""
+        if isinstance(msg, EpochAck | Tick):
+            return
+        reaction = self.react(msg)
+        if isinstance(msg, Percepts):  # beliefs first: the planner plans from them
+            update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
+            await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
+        await self.act(reaction)
+
+    async def epochs(self, first: int) -> None:
+        """Lockstep: the scheduler's two parts of each epoch.
+
+        First the executor's reports of the epoch before, the group's claims (by agent
+        name) and the world's outcomes and percepts: belief revision, rules, commands
+        (stage `beliefs`). Then, once the planner's rounds of this epoch are done, its
+        plans and status: plans to the executor (stage `done`).
+        """
+        a = self.agent
+        own = [keys.member(a, c) for c in ("executor", "planner")]
+        executor, planner = (m if not self.members or m in self.members else "" for m in own)
+        peers = sorted(
+            m for m in self.members if m.endswith("/scheduler") and m != keys.member(a, "scheduler")
+        )
+        if self.mind.claims is None:
+            peers = []
+        epoch = first
+        while True:
+            before = [Need(s, epoch - 1) for s in ([executor] if executor else []) + peers]
+            await self.gated([*before, Need(WORLD, epoch)], epoch)
+            await send_ack(self.ctx.bus, a, "scheduler", epoch, "beliefs")
+            await self.gated([Need(planner, epoch)] if planner else [], epoch)
+            await send_ack(self.ctx.bus, a, "scheduler", epoch, "done")
+            epoch += 1
+
+    async def gated(self, needs: list[Need], epoch: int) -> None:
+        """Wait for `needs`, then handle what they release, in order."""
+        released = await self.lockstep.gate.wait(needs, self.ack_timeout)
+        if released.late:
+            self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
+        for _, msg in released.messages:
+            await self.on_message(msg)
 
     async def watch_planner(self) -> None:
         """Send the search in progress again when the planner appears: a request sent
@@ -211,8 +272,8 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
     """Return the service body of one agent's scheduler."""
 
     async def body(ctx: ServiceContext) -> None:
-        service = SchedulerService(ctx, mind)
-        stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+        service = SchedulerService(ctx, mind, settings.ack_timeout)
+        stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         rpc = keys.component_rpc(mind.agent, "scheduler", "request")
         ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
         ctx.start(service.run(stream, settings.load_map), name="scheduler")

@@ -10,8 +10,10 @@ from the injected clock: `speed` simulated seconds per wall second, or as fast a
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
+
+from msgspec.structs import replace
 
 from cbdi import keys
 from cbdi.bus import messages, publish, serve
@@ -27,8 +29,10 @@ from cbdi.wire.world import (
     Tick,
     WorldInfoRequest,
 )
+from cbdi_world.acks import AckTracker, members_of
 from cbdi_world.errors import UnknownAgentError, WorldError
 from cbdi_world.maps import load_map, with_situation
+from cbdi_world.trace import RequestTrace
 from cbdi_world.world import AgentSpec, EpochResult, World
 
 __all__ = ["WorldService", "WorldSettings", "agent_specs", "build_world", "world_main"]
@@ -46,9 +50,15 @@ class WorldSettings(ServiceSettings):
     seed: int = field(default=0, metadata={"help": "seed of the random litter"})
     max_time: float = field(default=0.0, metadata={"help": "end the run at this simulated time"})
     stop_when_done: bool = field(default=True, metadata={"help": "end when all litter recycled"})
-    lockstep: bool = field(default=False, metadata={"help": "wait for every agent's ack"})
+    lockstep: bool = field(
+        default=False, metadata={"help": "virtual time: each epoch waits for every member's ack"}
+    )
+    member: tuple[str, ...] = field(
+        default=(),
+        metadata={"help": "lockstep member AGENT/COMPONENT (default: each agent's executor)"},
+    )
     wait_agents: float = field(
-        default=30.0, metadata={"help": "seconds to wait for agents before epoch 0 (0: none)"}
+        default=30.0, metadata={"help": "seconds to wait for every member before epoch 0 (0: none)"}
     )
     ack_timeout: float = field(default=30.0, metadata={"help": "lockstep: seconds per ack wait"})
     stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
@@ -93,9 +103,11 @@ class WorldService:
         self.settings = settings
         self.clock = clock or WallClock()
         self.agents = [a for a in world.info().agents]
-        self.acked: dict[str, int] = {a: -1 for a in self.agents}
-        self.ack_changed = asyncio.Condition()
+        self.members = members_of(settings.member, self.agents)
+        self.acks = AckTracker(self.members)
+        self.info = replace(world.info(), members=list(self.members))
         self.finished: RunFinished | None = None
+        self.trace = RequestTrace()
 
     def start(self) -> None:
         """Declare every endpoint now and start the tasks of the service."""
@@ -107,19 +119,26 @@ class WorldService:
         ctx.start(
             serve(bus, keys.world_rpc("info"), WorldInfoRequest, self.on_info, ctx), name="info"
         )
-        acks = messages(bus, keys.agent_ack_all(), EpochAck, ctx)
+        acks = messages(bus, keys.epoch_ack_all(), EpochAck, ctx)
         ctx.start(self.follow_acks(acks), name="acks")
         ctx.start(self.run(), name="epochs")
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
         try:
             reply = self.world.request(req)
+            self.trace.record(self.world.epoch, req, reply)
         except UnknownAgentError as exc:
             self.ctx.counters["unknown_agent"] += 1
             self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
             return ErrorReply(code="unknown_agent", message=str(exc))
-        if not reply.accepted:
-            self.ctx.log.info("rejected", agent=req.agent, action=req.action, reason=reply.reason)
+        self.ctx.log.info(
+            "act",
+            epoch=self.world.epoch,
+            agent=req.agent,
+            action=req.action,
+            accepted=reply.accepted,
+            reason=reply.reason,
+        )
         return reply
 
     async def on_stats(self, key: str, req: StatsRequest) -> Message:
@@ -129,22 +148,20 @@ class WorldService:
             return ErrorReply(code="unknown_agent", message=str(exc))
 
     async def on_info(self, key: str, req: WorldInfoRequest) -> Message:
-        return self.world.info()
+        return self.info
 
-    async def follow_acks(self, acks: object) -> None:
-        async for _, ack in acks:  # type: ignore[attr-defined]
-            if ack.agent not in self.acked:
-                self.ctx.bad_input(keys.agent_ack(ack.agent), UnknownAgentError(ack.agent))
+    async def follow_acks(self, acks: AsyncIterator[tuple[str, EpochAck]]) -> None:
+        async for key, ack in acks:
+            if ack.agent not in self.agents:
+                self.ctx.bad_input(key, UnknownAgentError(ack.agent))
                 continue
-            async with self.ack_changed:
-                self.acked[ack.agent] = max(self.acked[ack.agent], ack.epoch)
-                self.ack_changed.notify_all()
+            await self.acks.observe(ack)
 
     async def run(self) -> None:
         """Publish epoch 0, then step until the run ends; keep serving requests after."""
         await self.wait_for_agents()
         # The static world once, for recorders and viewers (also on request: rpc/info).
-        await publish(self.ctx.bus, keys.world_stream("info"), self.world.info(), block=True)
+        await publish(self.ctx.bus, keys.world_stream("info"), self.info, block=True)
         await self.publish_epoch(self.world.initial())
         start = self.clock.now()
         while self.finished is None:
@@ -155,22 +172,14 @@ class WorldService:
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
 
     async def wait_for_agents(self) -> None:
-        if self.settings.wait_agents <= 0 or not self.agents:
+        """The start barrier: epoch 0 waits until every member said it is ready."""
+        if self.settings.wait_agents <= 0 or not self.members:
             return
-        wanted = {keys.alive(keys.service_id("executor", a)) for a in self.agents}
-        seen: set[str] = set()
-        watch = self.ctx.bus.watch_alive(keys.ALIVE_ALL)
-        try:
-            async with asyncio.timeout(self.settings.wait_agents):
-                async for event in watch:
-                    if event.alive and event.key in wanted:
-                        seen.add(event.key)
-                    if seen >= wanted:
-                        break
-        except TimeoutError:
-            self.ctx.log.warning("agents_missing", missing=",".join(sorted(wanted - seen)))
-        finally:
-            await watch.aclose()  # type: ignore[attr-defined]
+        missing = await self.acks.wait(-1, "ready", self.settings.wait_agents)
+        if missing:
+            self.ctx.log.warning("members_missing", missing=",".join(missing))
+        else:
+            self.ctx.log.info("members_ready", members=",".join(self.members))
 
     async def pace(self, start: float) -> None:
         """Wait until the next epoch may start: every ack (lockstep), then its due time."""
@@ -184,13 +193,8 @@ class WorldService:
             await asyncio.sleep(0)  # flat out, but let requests in between epochs
 
     async def wait_acks(self, epoch: int) -> None:
-        try:
-            async with asyncio.timeout(self.settings.ack_timeout), self.ack_changed:
-                await self.ack_changed.wait_for(
-                    lambda: all(e >= epoch for e in self.acked.values())
-                )
-        except TimeoutError:
-            late = [a for a, e in self.acked.items() if e < epoch]
+        late = await self.acks.wait(epoch, "done", self.settings.ack_timeout)
+        if late:
             self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
 
     async def publish_epoch(self, result: EpochResult) -> None:
@@ -219,7 +223,14 @@ class WorldService:
         elif s.max_time > 0 and w.time >= s.max_time:
             reason = "time_limit"
         if reason:
-            self.finished = RunFinished(reason=reason, epoch=w.epoch, time=w.time)
+            self.finished = RunFinished(
+                reason=reason,
+                epoch=w.epoch,
+                time=w.time,
+                stalls=dict(self.acks.stalls),
+                requests=self.trace.count,
+                trace_digest=self.trace.digest(),
+            )
             await publish(self.ctx.bus, keys.world_stream("stats"), w.stats(), block=True)
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)
 
@@ -237,6 +248,7 @@ def build_world(settings: WorldSettings) -> World:
     )
     agents = settings.agent or ("robot1",)
     specs = agent_specs(agents, world_map.agent_starts, world_map.detection_depth)
+    members_of(settings.member, [s.name for s in specs])  # every member names an agent
     return World(world_map, specs, seed=settings.seed)
 
 

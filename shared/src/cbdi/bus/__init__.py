@@ -2,7 +2,16 @@
 
 from cbdi.bus.base import AliveEvent, Bus, Handler, Sample, Subscription, Token
 from cbdi.bus.memory import MemoryBus, MemoryNetwork
-from cbdi.bus.typed import ErrorSink, LogSink, inputs, messages, publish, request, serve
+from cbdi.bus.typed import (
+    ErrorSink,
+    LogSink,
+    inputs,
+    messages,
+    publish,
+    request,
+    sequenced_inputs,
+    serve,
+)
 from cbdi.bus.zenoh_bus import BusConfig, ZenohBus, open_bus
 
 __all__ = [
@@ -23,5 +32,6 @@ __all__ = [
     "open_bus",
     "publish",
     "request",
+    "sequenced_inputs",
     "serve",
 ]

@@ -20,13 +20,16 @@ class Sample:
     """A published payload, the concrete key it was published on, and the sender's stamp.
 
     `seq` counts the sender's publications on this key (from 1) and `sent_ns` is the
-    sender's wall time at publication (ns since the epoch); both 0 if the sender gave none.
+    sender's wall time at publication (ns since the epoch); `order` numbers the sender's
+    publications over all its keys (samples of several subscriptions may arrive out of
+    that order); all 0 if the sender gave none.
     """
 
     key: str
     payload: bytes
     seq: int = 0
     sent_ns: int = 0
+    order: int = 0
 
 
 @dataclass(frozen=True, slots=True)

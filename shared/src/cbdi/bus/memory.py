@@ -94,6 +94,7 @@ class MemoryBus:
         self._subscriptions: list[_MemorySubscription] = []
         self._tokens: list[_MemoryToken] = []
         self.sent: Counter[str] = Counter()
+        self.published = 0
 
     def _check(self) -> None:
         if self._closed:
@@ -102,7 +103,8 @@ class MemoryBus:
     async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
         self._check()
         seq = self.sent[key] = self.sent[key] + 1
-        sample = Sample(key, bytes(payload), seq, time.time_ns())
+        self.published += 1
+        sample = Sample(key, bytes(payload), seq, time.time_ns(), self.published)
         self.network.published.append(sample)
         for sub in list(self.network.subscribers):
             if any(_matches(expr, key) for expr in sub.key_exprs):

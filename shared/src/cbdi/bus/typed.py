@@ -8,7 +8,7 @@ Bad input never kills the caller: an undecodable sample is handed to the `ErrorS
 from __future__ import annotations
 
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
-from typing import Protocol, TypeVar
+from typing import NamedTuple, Protocol, TypeVar
 
 from cbdi import keys
 from cbdi.bus.base import Bus, Subscription
@@ -16,7 +16,17 @@ from cbdi.errors import CbdiError, RequestFailedError, WireError
 from cbdi.wire.base import Message, decode, decode_any, encode
 from cbdi.wire.common import ErrorReply
 
-__all__ = ["ErrorSink", "LogSink", "inputs", "messages", "publish", "request", "serve"]
+__all__ = [
+    "ErrorSink",
+    "LogSink",
+    "Stamped",
+    "inputs",
+    "messages",
+    "publish",
+    "request",
+    "sequenced_inputs",
+    "serve",
+]
 
 M = TypeVar("M", bound=Message)
 R = TypeVar("R", bound=Message)
@@ -83,6 +93,41 @@ def inputs(
     subscriptions exist from this call on; undecodable samples go to `sink`.
     """
     return _decoded_any(bus.subscribe(key_exprs), classes, sink)
+
+
+class Stamped(NamedTuple):
+    """A decoded input with its sender's stamp: `seq` on its key, `order` over all keys."""
+
+    key: str
+    seq: int
+    order: int
+    message: Message
+
+
+def sequenced_inputs(
+    bus: Bus, key_exprs: Sequence[str], classes: tuple[type[Message], ...], sink: ErrorSink
+) -> AsyncIterator[Stamped]:
+    """Like `inputs`, with each sample's stamp (`Stamped`).
+
+    Lockstep gates use it to tell which messages an acknowledgement covers, and in which
+    order their sender sent them.
+    """
+    return _sequenced_any(bus.subscribe(key_exprs), classes, sink)
+
+
+async def _sequenced_any(
+    sub: Subscription, classes: tuple[type[Message], ...], sink: ErrorSink
+) -> AsyncIterator[Stamped]:
+    try:
+        async for sample in sub:
+            try:
+                message = decode_any(sample.payload, classes, sample.key)
+            except WireError as exc:
+                sink.bad_input(sample.key, exc)
+                continue
+            yield Stamped(sample.key, sample.seq, sample.order, message)
+    finally:
+        await sub.close()
 
 
 async def _decoded_any(

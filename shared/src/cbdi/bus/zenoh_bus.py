@@ -77,24 +77,29 @@ async def open_bus(cfg: BusConfig) -> ZenohBus:
     return ZenohBus(session, asyncio.get_running_loop())
 
 
-_STAMP = struct.Struct("<QQ")
+_STAMP = struct.Struct("<QQQ")
+_OLD_STAMP = struct.Struct("<QQ")  # before `order`: still read
 
 
-def stamp(seq: int) -> bytes:
-    """Return the attachment every publication carries: sequence and wall time (ns)."""
+def stamp(seq: int, order: int = 0) -> bytes:
+    """Return the attachment every publication carries: sequence on its key, wall time
+    (ns) and the sender's publication number over all keys (`order`)."""
     # Wall time on purpose: it is the sender's publish time recorded in MCAP files.
-    return _STAMP.pack(seq, time.time_ns())
+    return _STAMP.pack(seq, time.time_ns(), order)
 
 
-def unstamp(attachment: Any) -> tuple[int, int]:
-    """Read (sequence, sent_ns) from an attachment; (0, 0) if absent or foreign."""
+def unstamp(attachment: Any) -> tuple[int, int, int]:
+    """Read (sequence, sent_ns, order) from an attachment; zeros if absent or foreign."""
     if attachment is None:
-        return 0, 0
+        return 0, 0, 0
     raw = attachment.to_bytes()
+    if len(raw) == _OLD_STAMP.size:
+        seq, sent_ns = _OLD_STAMP.unpack(raw)
+        return int(seq), int(sent_ns), 0
     if len(raw) != _STAMP.size:
-        return 0, 0
-    seq, sent_ns = _STAMP.unpack(raw)
-    return int(seq), int(sent_ns)
+        return 0, 0, 0
+    seq, sent_ns, order = _STAMP.unpack(raw)
+    return int(seq), int(sent_ns), int(order)
 
 
 def _post(loop: asyncio.AbstractEventLoop, fn: Any, *args: Any) -> None:
@@ -161,8 +166,8 @@ class _ZenohSubscription:
         push = self.queue.push
 
         def on_sample(s: zenoh.Sample) -> None:
-            seq, sent_ns = unstamp(s.attachment)
-            push(Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns))
+            seq, sent_ns, order = unstamp(s.attachment)
+            push(Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns, order))
 
         self._bus = bus
         self._subs: list[Any] = [
@@ -210,6 +215,7 @@ class ZenohBus:
         self._closeables: set[_ZenohSubscription | _ZenohToken] = set()
         self._publishers: OrderedDict[tuple[str, bool], Any] = OrderedDict()
         self.sent: Counter[str] = Counter()  # publications per key, also the sequence
+        self.published = 0  # publications over all keys: the order of what we sent
         self._queriers: OrderedDict[tuple[str, float], Any] = OrderedDict()
         self._closed = False
 
@@ -223,7 +229,8 @@ class ZenohBus:
         if publisher is None:
             publisher = self._declare_publisher(key, block)
         seq = self.sent[key] = self.sent[key] + 1
-        publisher.put(payload, attachment=stamp(seq))
+        self.published += 1
+        publisher.put(payload, attachment=stamp(seq, self.published))
 
     def _declare_querier(self, key: str, timeout: float) -> Any:
         """Declare (and cache) a querier for `key`: repeated requests skip declaration."""

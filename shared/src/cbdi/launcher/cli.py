@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 from collections.abc import Sequence
 from dataclasses import replace
@@ -52,6 +53,12 @@ def _parser() -> argparse.ArgumentParser:
         "--mode",
         choices=("online", "offline"),
         help="BDI agents plan online (continual planning) or offline (plan, then act)",
+    )
+    p.add_argument(
+        "--planning-speed",
+        type=float,
+        help="virtual time (lockstep): planner expansions per simulated second "
+        "(default: each agent file's planning_speed)",
     )
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout at the end")
     p.add_argument(
@@ -101,12 +108,15 @@ def _scenario(args: argparse.Namespace) -> Scenario:
         "known_litter",
         "spawn",
         "mode",
+        "planning_speed",
     ):
         value = getattr(args, name)
         if value is not None:
             run = replace(run, **{name: value})
-    if run.speed <= 0:
-        raise ConfigError("--speed", "speed", "must be > 0")
+    if not math.isfinite(run.speed) or run.speed < 0 or (run.speed == 0 and not run.lockstep):
+        raise ConfigError("--speed", "speed", "must be > 0 (0, flat out, only with --lockstep)")
+    if not math.isfinite(run.planning_speed) or run.planning_speed < 0:
+        raise ConfigError("--planning-speed", "planning_speed", "must be a finite number > 0")
     scenario = replace(scenario, run=run)
     return scenario.with_agents(args.agents) if args.agents else scenario
 
@@ -157,8 +167,10 @@ def _report(summary: RunSummary, as_json: bool) -> None:
     if summary.reason:
         line += f" ({summary.reason})"
     line += f": {summary.epochs} epochs, {summary.sim_time:.1f} simulated s, "
-    line += f"{summary.wall_time:.1f} wall s"
+    line += f"{summary.wall_time:.1f} wall s; trace {summary.trace_digest[:12]}"
     print(line, file=sys.stderr)
+    for member, epochs in summary.stalls.items():
+        print(f"  {member}: missed the ack timeout in {epochs} epochs", file=sys.stderr)
     for name, counts in summary.stats.get("agents", {}).items():
         text = " ".join(f"{k}={v}" for k, v in counts.items())
         acts = summary.actions.get(name)

@@ -69,6 +69,12 @@ class RunSummary:
     planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
     # Per agent: `actions` it asked the world for and the simulated time of the first.
     actions: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # The world's request trace (cbdi_world.trace): its length and digest. Equal
+    # digests, equal runs.
+    requests: int = 0
+    trace_digest: str = ""
+    # Lockstep members that missed an ack timeout (member -> epochs stalled).
+    stalls: dict[str, int] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -83,7 +89,8 @@ def free_port() -> int:
 
 
 def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessSpec]:
-    env = {"CBDI_CONNECT": endpoint}
+    # A fixed hash seed: no decision may hang on the order of a set of strings.
+    env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0"}
     run = scenario.run
     world_args = ["--map", str(scenario.map_path), "--speed", str(run.speed)]
     world_args += ["--seed", str(run.seed)]
@@ -98,6 +105,9 @@ def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessS
         own = agent.detection_depth is not None and run.det_area < 0
         depth = f":{agent.detection_depth}" if own else ""
         world_args += ["--agent", f"{agent.name}{depth}"]
+    for agent in scenario.agents:  # every component the world waits for, from epoch -1
+        for component in AGENT_KINDS[agent.kind]:
+            world_args += ["--member", keys.member(agent.name, component)]
     monitor = []
     if record:
         argv = argv_of(console_script("cbdi-monitor", "cbdi_monitor.cli"), "--output", record)
@@ -134,6 +144,8 @@ def _agent_spec(
             argv = argv_of(argv, "--agent-file", str(agent.agent_file))
         if component == "planner" and scenario.run.mode:
             argv = argv_of(argv, "--planning", scenario.run.mode)
+        if component == "planner" and scenario.run.planning_speed > 0:
+            argv = argv_of(argv, "--planning-speed", str(scenario.run.planning_speed))
         return ProcessSpec(keys.service_id(component, name), argv, env)
     if kind == "scripted":
         argv = argv_of(
@@ -310,6 +322,8 @@ async def _await_end(
         sink = LogSink()
         async for _, msg in messages(bus, keys.world_stream("events"), RunFinished, sink):
             summary.epochs, summary.sim_time = msg.epoch, msg.time
+            summary.stalls = dict(sorted(msg.stalls.items()))
+            summary.requests, summary.trace_digest = msg.requests, msg.trace_digest
             end(msg.reason)
 
     async def failure(proc: ManagedProcess) -> None:

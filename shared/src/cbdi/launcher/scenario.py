@@ -65,6 +65,7 @@ class RunSettings:
     known_litter: int = -1  # litter items known at the start (-1: the map's)
     spawn: float = -1.0  # probability of new litter per epoch (-1: the map's)
     mode: str = ""  # BDI agents' planning: online, offline ("": each agent file's)
+    planning_speed: float = 0.0  # virtual time: expansions per simulated s (0: agent file's)
 
 
 PLANNING_MODES = ("", "online", "offline")

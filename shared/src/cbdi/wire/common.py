@@ -33,6 +33,11 @@ class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     reason: str
     epoch: int
     time: float
+    # Lockstep: members that missed the ack timeout, with how many epochs they stalled.
+    stalls: dict[str, int] = {}
+    # The world's request trace: how many requests, and the digest of all of them.
+    requests: int = 0
+    trace_digest: str = ""
 
 
 class Liveliness(Message, frozen=True, tag="cbdi.Liveliness/1"):

@@ -6,6 +6,10 @@ Times are simulated seconds (the domain's time units); an epoch lasts `epoch_dur
 
 from __future__ import annotations
 
+from typing import Annotated, Literal
+
+import msgspec
+
 from cbdi.wire.base import Message
 
 __all__ = [
@@ -165,13 +169,30 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     epoch_duration: float
     durations: dict[str, float]
     known_litter: list[LitterView] = []  # litter agents know of at the start
+    # Lockstep: the members (`agent/component`) whose acks every epoch waits for.
+    members: list[str] = []
+
+
+Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+ACK_STAGES = ("ready", "beliefs", "done")
 
 
 class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
-    """Acknowledge an epoch (lockstep): the agent has handled everything up to `epoch`."""
+    """Acknowledge an epoch (lockstep): `component` of `agent` has handled epoch `epoch`.
 
-    agent: str
-    epoch: int
+    `stage` is `done` (everything of the epoch handled, its messages sent), `beliefs`
+    (the scheduler's first half: beliefs and commands out, the planner may start) or
+    `ready` (epoch -1: alive, subscribed, waiting for epoch 0; the start barrier).
+    `sent` is what the component had published by then, per key (cumulative counts, the
+    `seq` of its last message on that key): a receiver holding fewer of a key's messages
+    waits for the rest, so nothing of epoch k arrives after the next epoch starts.
+    """
+
+    agent: Name
+    epoch: Annotated[int, msgspec.Meta(ge=-1)]
+    component: Name = "executor"
+    stage: Literal["ready", "beliefs", "done"] = "done"
+    sent: Annotated[dict[str, Annotated[int, msgspec.Meta(ge=0)]], msgspec.Meta(max_length=64)] = {}
 
 
 class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):

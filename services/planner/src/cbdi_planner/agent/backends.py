@@ -10,6 +10,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 from cbdi_planner.errors import SearchTimeout, Unsolvable
@@ -18,7 +19,9 @@ from cbdi_planner.pddl.ast import Domain, Problem
 from cbdi_planner.plan import Plan, parse_plan
 from cbdi_planner.search import Budget, search
 
-__all__ = ["BACKENDS", "plan_with", "problem_text"]
+__all__ = ["BACKENDS", "COUNTING_BACKENDS", "Counted", "plan_counted", "plan_with", "problem_text"]
+
+COUNTING_BACKENDS = ("cbdi",)  # those that can be bounded and charged by node expansions
 
 BACKENDS = ("cbdi", "kairos")
 
@@ -39,6 +42,32 @@ def plan_with(
     if backend == "kairos":
         return _kairos(domain_file, problem, seconds)
     raise ValueError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
+
+
+@dataclass(frozen=True)
+class Counted:
+    """An offline search bounded by node expansions: the plan (or why none) and its cost."""
+
+    plan: Plan | None
+    expanded: int
+    error: str = ""
+
+
+def plan_counted(domain: Domain, problem: Problem, max_expansions: int) -> Counted:
+    """Plan `problem` as `plan_with("cbdi")` does, bounded by node expansions only.
+
+    Virtual time charges the search to simulated time by what it expanded, so the
+    result is the same on any machine, however loaded.
+    """
+    result = search(
+        ground(domain, problem), strategy="ff", budget=Budget(max_expansions=max_expansions)
+    )
+    expanded = max(1, result.stats.expanded)
+    if result.plan is not None:
+        return Counted(result.plan, expanded)
+    if result.status == "timeout":
+        return Counted(None, expanded, f"no plan within {max_expansions} expansions")
+    return Counted(None, expanded, f"no plan reaches the goal ({result.status})")
 
 
 def _kairos(domain_file: Path, problem: Problem, seconds: float) -> Plan:

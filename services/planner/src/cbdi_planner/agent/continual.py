@@ -280,9 +280,17 @@ class ContinualPlanner:
         return SearchThread(task, state, empty_rounds=self.settings.empty_rounds, **kw)  # type: ignore[arg-type]
 
     # -- rounds ---------------------------------------------------------------------------
-    def round(self, search: Search) -> list[Event]:
-        """Run one round of `search` (call from a worker thread)."""
-        return search.thread.step(self.bound())
+    def round(self, search: Search, expansions: int | None = None) -> list[Event]:
+        """Run one round of `search` (call from a worker thread).
+
+        `expansions` (virtual time) bounds the round by node expansions only: what is
+        left of the epoch's budget, at most `expansions_per_round`.
+        """
+        bound = self.bound()
+        if expansions is not None:
+            per_round = bound.expansions or expansions
+            bound = RoundBound(None, max(1, min(per_round, expansions)), bound.plan_size)
+        return search.thread.step(bound)
 
     def after_round(self, search: Search, events: list[Event]) -> list[Message]:
         """Turn a round's events into messages; drop a search replaced meanwhile."""

@@ -23,15 +23,18 @@ from msgspec.structs import replace
 from cbdi import keys
 from cbdi.agentfile import RawAgentFile
 from cbdi.beliefs import BeliefSet, from_wire
-from cbdi.bus import inputs, publish
+from cbdi.bus import publish, sequenced_inputs
+from cbdi.bus.typed import Stamped
 from cbdi.errors import CbdiError
+from cbdi.lockstep import Lockstep, Need, announce_ready, default_sender, send_ack
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import ActionStatus, BeliefsUpdate, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
-from cbdi_planner.agent.backends import plan_with
-from cbdi_planner.agent.continual import ContinualPlanner
+from cbdi.wire.world import EpochAck, Tick
+from cbdi_planner.agent.backends import COUNTING_BACKENDS, Counted, plan_counted, plan_with
+from cbdi_planner.agent.continual import ContinualPlanner, Search
 from cbdi_planner.agent.errors import BadRequestError, UnknownAgentError
 from cbdi_planner.agent.problem import (
     GoalError,
@@ -41,6 +44,7 @@ from cbdi_planner.agent.problem import (
     problem_from_beliefs,
 )
 from cbdi_planner.agent.steps import plan_steps
+from cbdi_planner.continual import Event, RoundDone
 from cbdi_planner.errors import PlannerError
 from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain, Problem
@@ -48,8 +52,12 @@ from cbdi_planner.plan import Plan
 
 __all__ = ["OnlinePlannerService", "PlannerService", "PlannerSettings", "planner_main"]
 
-INPUTS: tuple[type[Message], ...] = (SearchRequest, BeliefsUpdate)
-ONLINE_INPUTS: tuple[type[Message], ...] = (SearchRequest, BeliefsUpdate, ActionStatus)
+INPUTS: tuple[type[Message], ...] = (SearchRequest, BeliefsUpdate, ActionStatus, Tick, EpochAck)
+ONLINE_INPUTS = INPUTS
+NO_COUNTING = (
+    "the {backend} backend cannot count node expansions, so it cannot plan in virtual "
+    "time (a lockstep world); use backend cbdi, or run the world without lockstep"
+)
 
 
 @dataclass(frozen=True)
@@ -62,9 +70,110 @@ class PlannerSettings(ServiceSettings):
     time_grid: float = field(default=1.0, metadata={"help": "snap step starts to this grid"})
     planning: str = field(default="", metadata={"help": "online or offline (default: agent file)"})
     improve: bool = field(default=True, metadata={"help": "online: look for improved plans"})
+    planning_speed: float = field(
+        default=0.0,
+        metadata={"help": "virtual time: expansions per simulated second (0: agent file's)"},
+    )
+    ack_timeout: float = field(
+        default=30.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
+    )
 
 
-class PlannerService:
+class _Epochs:
+    """The lockstep side shared by both modes: inputs, the gate, the epoch's budget."""
+
+    ctx: ServiceContext
+    agent: str
+    planning_speed: float
+    ack_timeout: float
+    epoch_duration: float = 1.0
+    lockstep: Lockstep
+
+    def _lockstep(self, input_keys: list[str]) -> Lockstep:
+        requests = keys.planner_requests(self.agent)
+        scheduler = keys.member(self.agent, "scheduler")
+
+        def sender_of(key: str) -> str:  # requests sit under our key but are the scheduler's
+            return scheduler if key == requests else default_sender(key)
+
+        return Lockstep(
+            input_keys,
+            lambda first: self.ctx.start(self.epochs(first), name="epochs"),
+            sender_of,
+            keep_ticks=False,
+        )
+
+    def lockstep_keys(self) -> list[str]:
+        a = self.agent
+        return [
+            keys.world_stream("clock"),
+            keys.epoch_ack(a, "scheduler"),
+            keys.epoch_ack(a, "executor"),
+        ]
+
+    def budget(self) -> int:
+        """Node expansions of one epoch: the planning speed times the epoch's duration."""
+        return max(1, round(self.planning_speed * self.epoch_duration))
+
+    async def inputs(self, stream: AsyncIterator[Stamped]) -> None:
+        """Every input: handled at once (real time) or through the gate (lockstep)."""
+        async for item in stream:
+            if isinstance(item.message, Tick):
+                self.epoch_duration = item.message.epoch_duration
+            for key, m in await self.lockstep.put(item):
+                if not isinstance(m, Tick | EpochAck):
+                    await self.checked_handle(key, m)
+
+    async def epochs(self, first: int) -> None:
+        """Lockstep: once the scheduler's beliefs of an epoch (and the executor's
+        reports of the one before) are in, handle them, plan for the epoch, acknowledge."""
+        a = self.agent
+        needs_of = lambda k: [  # noqa: E731
+            Need(keys.member(a, "executor"), k - 1),
+            Need(keys.member(a, "scheduler"), k, "beliefs"),
+        ]
+        epoch = first
+        while True:
+            released = await self.lockstep.gate.wait(needs_of(epoch), self.ack_timeout)
+            if released.late:
+                self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
+            for key, msg in released.messages:
+                if not isinstance(msg, Tick | EpochAck):
+                    await self.checked_handle(key, msg)
+            await self.plan_epoch()
+            await send_ack(self.ctx.bus, a, "planner", epoch)
+            epoch += 1
+
+    async def checked_handle(self, key: str, msg: Message) -> None:
+        """Handle one input; bad input is reported, never fatal."""
+        agent = getattr(msg, "agent", None)
+        try:
+            if agent != self.agent:
+                raise UnknownAgentError(str(agent), self.agent, type(msg).__name__)
+            await self.handle_input(key, msg)
+        except CbdiError as exc:
+            self.ctx.bad_input(key, exc)
+        except Exception as exc:
+            self.ctx.crashed(key, exc)
+
+    async def handle_input(self, key: str, msg: Message) -> None:
+        raise NotImplementedError
+
+    async def plan_epoch(self) -> None:
+        raise NotImplementedError
+
+
+@dataclass
+class _Pending:
+    """An offline search in virtual time: its result, and expansions still to be paid."""
+
+    request: SearchRequest
+    problem: Problem
+    result: Counted | None = None
+    owed: int = 0
+
+
+class PlannerService(_Epochs):
     """Plans for one agent on request."""
 
     def __init__(
@@ -75,9 +184,15 @@ class PlannerService:
         raw: RawAgentFile,
         backend: str,
         grid: float,
+        planning_speed: float = 0.0,
+        ack_timeout: float = 30.0,
     ) -> None:
         self.ctx, self.agent, self.domain, self.raw = ctx, agent, domain, raw
         self.backend, self.grid = backend, grid
+        self.planning_speed = planning_speed or raw.planning.planning_speed
+        self.ack_timeout = ack_timeout
+        self.pending: _Pending | None = None
+        self.lockstep = self._lockstep(self.input_keys())
         self.beliefs = BeliefSet()
         self.has_beliefs = False
         self.deferred: SearchRequest | None = None  # a request that came before any beliefs
@@ -87,19 +202,11 @@ class PlannerService:
         self.plan_ids = count(1)
 
     def input_keys(self) -> list[str]:
-        return [keys.planner_requests(self.agent), keys.scheduler_beliefs(self.agent)]
+        a = self.agent
+        return [keys.planner_requests(a), keys.scheduler_beliefs(a), *self.lockstep_keys()]
 
-    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
-        async for key, msg in stream:
-            agent = getattr(msg, "agent", None)
-            try:
-                if agent != self.agent:
-                    raise UnknownAgentError(str(agent), self.agent, type(msg).__name__)
-                await self.handle(msg)
-            except CbdiError as exc:
-                self.ctx.bad_input(key, exc)
-            except Exception as exc:
-                self.ctx.crashed(key, exc)
+    async def handle_input(self, key: str, msg: Message) -> None:
+        await self.handle(msg)
 
     async def handle(self, msg: Message) -> None:
         if isinstance(msg, BeliefsUpdate):
@@ -123,10 +230,15 @@ class PlannerService:
         if self.searching is not None:
             self.searching.cancel()
             self.searching = None
+        self.pending = None
         if req.kind == "cancel":
             self.request = None
             await self.status(req.request_id, "cancelled")
             return
+        if self.lockstep.on and self.backend not in COUNTING_BACKENDS:
+            reason = NO_COUNTING.format(backend=self.backend)
+            await self.status(req.request_id, "failed", reason)
+            raise BadRequestError(req.request_id, reason)
         if req.kind == "revise" and self.request is not None:
             req = replace(req, request_id=self.request.request_id)
         try:
@@ -137,7 +249,36 @@ class PlannerService:
             raise BadRequestError(req.request_id, str(exc)) from exc
         self.request = req
         await self.status(req.request_id, "searching")
+        if self.lockstep.on:
+            self.pending = _Pending(req, problem)  # searched and paid for epoch by epoch
+            return
         self.searching = self.ctx.start(self.search(req, problem), name="search")
+
+    async def plan_epoch(self) -> None:
+        """Virtual time: search (bounded by expansions), then pay for it epoch by epoch;
+        the plan goes out in the epoch its expansions are paid off, as a plan-then-act
+        robot waits while the world moves on."""
+        p = self.pending
+        if p is None:
+            return
+        if p.result is None:
+            most = max(1, round(self.raw.planning.timeout * self.planning_speed))
+            try:
+                p.result = await asyncio.to_thread(plan_counted, self.domain, p.problem, most)
+            except (GoalError, PlannerError, ValueError) as exc:
+                p.result = Counted(None, 1, str(exc))
+            p.owed = p.result.expanded
+        p.owed -= self.budget()
+        if p.owed > 0:
+            return
+        self.pending = None
+        if p.result.plan is None:
+            self.ctx.log.warning(
+                "search_failed", request=p.request.request_id, error=p.result.error
+            )
+            await self.status(p.request.request_id, "failed", p.result.error)
+            return
+        await self.publish_plan(p.request, p.result.plan)
 
     def problem(self, req: SearchRequest) -> tuple[SearchRequest, Problem]:
         """The request's problem: its own PDDL problem, or the beliefs and its goal."""
@@ -185,14 +326,27 @@ class PlannerService:
         await publish(self.ctx.bus, keys.planner_status(self.agent), msg, block=True)
 
 
-class OnlinePlannerService:
-    """Continual planning for one agent: rounds in a worker thread, plans as they come."""
+class OnlinePlannerService(_Epochs):
+    """Continual planning for one agent: rounds in a worker thread, plans as they come.
 
-    def __init__(self, ctx: ServiceContext, core: ContinualPlanner) -> None:
-        self.ctx, self.core = ctx, core
+    Real time: rounds back to back, bounded by seconds. Virtual time: this epoch's rounds
+    after its beliefs, bounded by expansions (the epoch's budget), then the ack.
+    """
+
+    def __init__(
+        self,
+        ctx: ServiceContext,
+        core: ContinualPlanner,
+        planning_speed: float = 0.0,
+        ack_timeout: float = 30.0,
+    ) -> None:
+        self.ctx, self.core, self.agent = ctx, core, core.agent
         self.has_beliefs = False
         self.deferred: SearchRequest | None = None
         self.wake = asyncio.Event()
+        self.planning_speed = planning_speed or core.settings.planning_speed
+        self.ack_timeout = ack_timeout
+        self.lockstep = self._lockstep(self.input_keys())
 
     def input_keys(self) -> list[str]:
         agent = self.core.agent
@@ -200,22 +354,33 @@ class OnlinePlannerService:
             keys.planner_requests(agent),
             keys.scheduler_beliefs(agent),
             keys.executor_status(agent),
+            *self.lockstep_keys(),
         ]
 
-    async def run(self, stream: AsyncIterator[tuple[str, Message]]) -> None:
-        core = self.core
-        async for key, msg in stream:
-            agent = getattr(msg, "agent", None)
-            try:
-                if agent != core.agent:
-                    raise UnknownAgentError(str(agent), core.agent, type(msg).__name__)
-                await self.handle(key, msg)
-            except CbdiError as exc:
-                self.ctx.bad_input(key, exc)
-            except Exception as exc:
-                self.ctx.crashed(key, exc)
-            if core.search is not None:
-                self.wake.set()
+    async def handle_input(self, key: str, msg: Message) -> None:
+        await self.handle(key, msg)
+        if self.core.search is not None and not self.lockstep.on:
+            self.wake.set()
+
+    async def plan_epoch(self) -> None:
+        """Run this epoch's rounds: as many as its expansion budget pays for."""
+        budget = self.budget()
+        while (search := self.core.search) is not None and budget > 0:
+            events = await self.round(search, budget)
+            if events is None:
+                return
+            budget -= max(1, sum(e.expanded for e in events if isinstance(e, RoundDone)))
+            await self.send(self.core.after_round(search, events))
+
+    async def round(self, search: Search, expansions: int | None) -> list[Event] | None:
+        """One round in a worker thread; a crash fails the search (reported), not us."""
+        try:
+            return await asyncio.to_thread(self.core.round, search, expansions)
+        except Exception as exc:
+            self.ctx.log.error("search_error", error=f"{type(exc).__name__}: {exc}")
+            self.core.search = None
+            await self.send([self.core._status(search.request_id, "failed", str(exc))])
+            return None
 
     async def handle(self, key: str, msg: Message) -> None:
         core = self.core
@@ -252,12 +417,8 @@ class OnlinePlannerService:
             await self.wake.wait()
             self.wake.clear()
             while (search := self.core.search) is not None:
-                try:
-                    events = await asyncio.to_thread(self.core.round, search)
-                except Exception as exc:
-                    self.ctx.log.error("search_error", error=f"{type(exc).__name__}: {exc}")
-                    self.core.search = None
-                    await self.send([self.core._status(search.request_id, "failed", str(exc))])
+                events = await self.round(search, None)
+                if events is None:
                     break
                 await self.send(self.core.after_round(search, events))
 
@@ -309,13 +470,25 @@ def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -
                 log=ctx.log.info,
                 improve=settings.improve,
             )
-            online = OnlinePlannerService(ctx, core)
-            stream = inputs(ctx.bus, online.input_keys(), ONLINE_INPUTS, ctx)
-            ctx.start(online.run(stream), name="planner")
+            online = OnlinePlannerService(ctx, core, settings.planning_speed, settings.ack_timeout)
+            stream = sequenced_inputs(ctx.bus, online.input_keys(), ONLINE_INPUTS, ctx)
+            ctx.start(online.inputs(stream), name="planner")
             ctx.start(online.rounds(), name="rounds")
-            return
-        service = PlannerService(ctx, settings.agent, domain, raw, backend, settings.time_grid)
-        stream = inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
-        ctx.start(service.run(stream), name="planner")
+            service: _Epochs = online
+        else:
+            service = PlannerService(
+                ctx,
+                settings.agent,
+                domain,
+                raw,
+                backend,
+                settings.time_grid,
+                settings.planning_speed,
+                settings.ack_timeout,
+            )
+            stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
+            ctx.start(service.inputs(stream), name="planner")
+        ready = announce_ready(ctx.bus, settings.agent, "planner", service.lockstep.decided)
+        ctx.start(ready, name="ready")
 
     return body

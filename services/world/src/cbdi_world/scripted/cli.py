@@ -15,6 +15,7 @@ from itertools import count
 from cbdi import keys
 from cbdi.bus import publish, request
 from cbdi.errors import CbdiError, ConfigError, WireError
+from cbdi.lockstep import announce_ready
 from cbdi.runtime import ServiceContext, ServiceSettings, load_config, run_service
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.base import decode_any
@@ -55,6 +56,7 @@ class ScriptedAgent:
         self.ctx, self.name, self.beliefs = ctx, name, beliefs
         self.script, self.retries, self.tries = script, retries, 0
         self.busy = False
+        self.started = False  # epoch 0 seen: the start barrier is passed
         self.ids = count(1)
 
     async def run(self, samples: object) -> None:
@@ -83,6 +85,7 @@ class ScriptedAgent:
             self.tries = 0
 
     async def on_percepts(self, p: Percepts) -> None:
+        self.started = True
         self.beliefs.revise(p)
         if not self.busy:
             step = self.choose()
@@ -151,6 +154,8 @@ def scripted_main(
         samples = ctx.bus.subscribe(keys.world_for_agent(settings.agent))
         agent = ScriptedAgent(ctx, settings.agent, beliefs, script, settings.retries)
         ctx.start(agent.run(samples), name="agent")
+        ready = announce_ready(ctx.bus, settings.agent, "executor", lambda: agent.started)
+        ctx.start(ready, name="ready")
 
     return body
 

@@ -1,0 +1,45 @@
+"""The world's request trace: what every agent asked for, epoch by epoch (`RequestTrace`).
+
+Two runs are the same run when their traces are equal. Requests of one epoch are sorted
+(agents act side by side, so their arrival order is not part of the run); the digest is a
+SHA-256 over the sorted entries, so a whole run compares by one string.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+from cbdi.wire.world import ActionReply, ActionRequest
+
+__all__ = ["RequestTrace"]
+
+
+class RequestTrace:
+    """Fold each served request into a running digest, epoch by epoch."""
+
+    def __init__(self) -> None:
+        self._hash = hashlib.sha256()
+        self._epoch = -1
+        self._pending: list[str] = []
+        self.count = 0
+
+    def record(self, epoch: int, req: ActionRequest, reply: ActionReply) -> None:
+        """Note one request (served in `epoch`) and whether the world accepted it."""
+        if epoch != self._epoch:
+            self._flush()
+            self._epoch = epoch
+        target = list(req.target) if req.target is not None else None
+        entry = [epoch, req.agent, req.action, target, req.item, reply.accepted]
+        self._pending.append(json.dumps(entry))
+        self.count += 1
+
+    def _flush(self) -> None:
+        for line in sorted(self._pending):
+            self._hash.update(line.encode() + b"\n")
+        self._pending = []
+
+    def digest(self) -> str:
+        """Return the digest of everything recorded so far."""
+        self._flush()
+        return self._hash.hexdigest()

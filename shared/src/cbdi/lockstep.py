@@ -1,0 +1,284 @@
+"""Lockstep in virtual time: an epoch's inputs, released in one order (`EpochGate`).
+
+In lockstep every component of every agent handles epoch k in a fixed sequence: the
+world's tick and percepts; the scheduler's belief revision and rules (stage `beliefs`);
+the planner's rounds for the epoch; the scheduler's plans to the executor; the
+executor's dispatch. Each acknowledges its part with what it had sent by then
+(`EpochAck.sent`, its bus's per-key counts). A component waits for its upstream's acks
+before its part (`Need`), then takes exactly the messages those acks cover (sequence
+number up to the count), sender by sender in the order it asked for them, each sender's
+in arrival order. What a component does in epoch k so depends only on what was sent to
+it, never on when it arrived or how busy the machine is.
+
+The start barrier is epoch -1: a component announces `ready` (subscribed, waiting for
+epoch 0) until it sees epoch 0, and the world starts epoch 0 once every member did.
+
+Resynchronisation, one rule for late, frozen and restarted members alike: a `Need` not
+met within the timeout is given up for this epoch and its sender named as late; what it
+sent meanwhile is taken at the next gate. A sender whose counts go back has restarted:
+its counts start afresh.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from cbdi import keys
+from cbdi.bus.base import Bus
+from cbdi.bus.typed import Stamped, publish
+from cbdi.clock import WallClock
+from cbdi.wire.base import Message
+from cbdi.wire.world import ACK_STAGES, EpochAck, Percepts, Tick
+
+__all__ = [
+    "WORLD",
+    "EpochGate",
+    "GateResult",
+    "Lockstep",
+    "Need",
+    "ack",
+    "announce_ready",
+    "default_sender",
+    "send_ack",
+    "stage_rank",
+]
+
+WORLD = "world"  # the sender name of everything the world publishes
+READY_EVERY = 0.5  # wall seconds between `ready` announcements (the barrier only)
+MAX_SENT_KEYS = 64
+
+
+def stage_rank(stage: str) -> int:
+    """Return the order of a stage within an epoch (ready < beliefs < done)."""
+    return ACK_STAGES.index(stage)
+
+
+def default_sender(key: str) -> str:
+    """Return who publishes on a concrete key: `world`, or the member `agent/component`."""
+    part = keys.describe(key)
+    if part["component"] == WORLD:
+        return WORLD
+    return keys.member(part["agent"], part["component"])
+
+
+@dataclass(frozen=True, slots=True)
+class Need:
+    """What a gate waits for: `sender`'s ack of `epoch` at `stage` or later.
+
+    For the world, the agent's percepts of `epoch` (the last of what the world publishes
+    for an agent in an epoch; its tick and outcomes come before them). An epoch below 0
+    needs nothing (the start).
+    """
+
+    sender: str
+    epoch: int
+    stage: str = "done"
+
+
+@dataclass
+class GateResult:
+    """The messages an epoch's gate released (in order) and the senders that were late."""
+
+    messages: list[tuple[str, Message]] = field(default_factory=list)
+    late: list[str] = field(default_factory=list)
+
+
+@dataclass
+class _Sender:
+    buffer: list[Stamped] = field(default_factory=list)
+    received: dict[str, int] = field(default_factory=dict)  # highest seq per key
+    acks: dict[tuple[int, int], EpochAck] = field(default_factory=dict)
+    world_epoch: int = -1
+
+
+class EpochGate:
+    """Buffer a component's inputs and release them epoch by epoch (see the module)."""
+
+    def __init__(
+        self, key_exprs: Sequence[str], sender_of: Callable[[str], str] = default_sender
+    ) -> None:
+        self.key_exprs = [e.split("/") for e in key_exprs]  # what this component hears
+        self.sender_of = sender_of
+        self.senders: dict[str, _Sender] = {}
+        self.changed = asyncio.Condition()
+
+    def _of(self, sender: str) -> _Sender:
+        return self.senders.setdefault(sender, _Sender())
+
+    async def put(self, item: Stamped) -> None:
+        """Take in one input (an ack, or a message from a sender)."""
+        key, seq, msg = item.key, item.seq, item.message
+        async with self.changed:
+            if isinstance(msg, EpochAck):
+                self._ack(msg)
+            else:
+                s = self._of(self.sender_of(key))
+                if seq and seq < s.received.get(key, 0):
+                    s.received = {}  # the sender restarted: its counts start afresh
+                s.buffer.append(item)
+                s.received[key] = max(s.received.get(key, 0), seq)
+                if isinstance(msg, Percepts):
+                    s.world_epoch = max(s.world_epoch, msg.epoch)
+            self.changed.notify_all()
+
+    def _ack(self, msg: EpochAck) -> None:
+        s = self._of(keys.member(msg.agent, msg.component))
+        s.acks[(msg.epoch, stage_rank(msg.stage))] = msg
+        for old in [k for k in s.acks if k[0] < msg.epoch - 2]:
+            del s.acks[old]
+
+    def _ack_for(self, need: Need) -> EpochAck | None:
+        """The sender's ack meeting `need`: the exact one, else the earliest later one."""
+        s = self._of(need.sender)
+        wanted = (need.epoch, stage_rank(need.stage))
+        found = [k for k in s.acks if k >= wanted]
+        return s.acks[min(found)] if found else None
+
+    def met(self, need: Need) -> bool:
+        """Whether `need` is met: its ack (or world percepts) and all it covers are here."""
+        if need.epoch < 0:
+            return True
+        s = self._of(need.sender)
+        if need.sender == WORLD:
+            return s.world_epoch >= need.epoch
+        ack = self._ack_for(need)
+        if ack is None:
+            return False
+        return all(s.received.get(k, 0) >= n for k, n in ack.sent.items() if self.hears(k))
+
+    def hears(self, key: str) -> bool:
+        """Whether this component subscribes to `key` (only those counts are waited for)."""
+        chunks = key.split("/")
+        return any(_matches(e, chunks) for e in self.key_exprs)
+
+    async def wait(self, needs: Sequence[Need], timeout: float | None) -> GateResult:
+        """Wait until every need is met (or the timeout), then release what they cover."""
+        result = GateResult()
+        try:
+            async with asyncio.timeout(timeout), self.changed:
+                await self.changed.wait_for(lambda: all(self.met(n) for n in needs))
+        except TimeoutError:
+            result.late = [n.sender for n in needs if not self.met(n)]
+        async with self.changed:
+            for need in needs:
+                result.messages += self._take(need)
+        return result
+
+    def _take(self, need: Need) -> list[tuple[str, Message]]:
+        s = self._of(need.sender)
+        if need.sender == WORLD:
+            cut = next(
+                (
+                    i + 1
+                    for i, item in enumerate(s.buffer)
+                    if isinstance(item.message, Percepts) and item.message.epoch >= need.epoch
+                ),
+                len(s.buffer) if need.epoch < 0 else 0,
+            )
+            head, s.buffer = s.buffer[:cut], s.buffer[cut:]
+            return [(i.key, i.message) for i in _in_order(head)]
+        ack = self._ack_for(need) if need.epoch >= 0 else None
+        limit = ack.sent if ack is not None else None
+        taken: list[Stamped] = []
+        kept: list[Stamped] = []
+        for item in s.buffer:
+            if limit is None or not item.seq or item.seq <= limit.get(item.key, 0):
+                taken.append(item)
+            else:
+                kept.append(item)  # sent after that ack: a later gate's
+        s.buffer = kept
+        return [(i.key, i.message) for i in _in_order(taken)]
+
+
+def _in_order(items: list[Stamped]) -> list[Stamped]:
+    """Put one sender's messages in the order it sent them (several subscriptions
+    deliver in no common order); unstamped ones keep their arrival order."""
+    if any(not i.order for i in items):
+        return items
+    return sorted(items, key=lambda i: i.order)
+
+
+def _matches(expr: list[str], key: list[str]) -> bool:
+    """Match key chunks against a key expression's (`*` one chunk, `**` any number)."""
+    if not expr:
+        return not key
+    if expr[0] == "**":
+        return any(_matches(expr[1:], key[i:]) for i in range(len(key) + 1))
+    if not key:
+        return False
+    return (expr[0] == "*" or expr[0] == key[0]) and _matches(expr[1:], key[1:])
+
+
+class Lockstep:
+    """A component's mode, decided by the world's first tick, and its gate.
+
+    Until the first `Tick` inputs wait; then, in lockstep, they all go to the gate and
+    `start(first_epoch)` starts the component's epoch loop; in real time `put` hands each
+    input back at once, to be handled in arrival order as before.
+    """
+
+    def __init__(
+        self,
+        key_exprs: Sequence[str],
+        start: Callable[[int], object],
+        sender_of: Callable[[str], str] = default_sender,
+        keep_ticks: bool = True,
+    ) -> None:
+        self.gate = EpochGate(key_exprs, sender_of)
+        self.start = start
+        self.keep_ticks = keep_ticks  # a component that never waits for the world drops them
+        self.on: bool | None = None
+        self.early: list[Stamped] = []
+
+    def decided(self) -> bool:
+        """Whether the first tick came (the start barrier is behind us)."""
+        return self.on is not None
+
+    async def put(self, item: Stamped) -> list[tuple[str, Message]]:
+        """Take one input; return those to handle now (real time), else none."""
+        msg = item.message
+        if self.on is None:
+            self.early.append(item)
+            if not isinstance(msg, Tick):
+                return []
+            self.on = msg.lockstep
+            early, self.early = self.early, []
+            if not self.on:
+                return [(i.key, i.message) for i in early]
+            for e in early:
+                if self.keep_ticks or not isinstance(e.message, Tick):
+                    await self.gate.put(e)
+            self.start(msg.epoch)
+            return []
+        if self.on:
+            if self.keep_ticks or not isinstance(msg, Tick):
+                await self.gate.put(item)
+            return []
+        return [(item.key, msg)]
+
+
+def ack(agent: str, component: str, epoch: int, stage: str, bus: Bus) -> EpochAck:
+    """Return the ack of `epoch` at `stage` with what `bus` has sent so far."""
+    sent = {k: n for k, n in sorted(bus.sent.items()) if not k.endswith("/ack")}
+    if len(sent) > MAX_SENT_KEYS:
+        sent = dict(list(sent.items())[:MAX_SENT_KEYS])
+    return EpochAck(agent=agent, epoch=epoch, component=component, stage=stage, sent=sent)  # type: ignore[arg-type]
+
+
+async def send_ack(bus: Bus, agent: str, component: str, epoch: int, stage: str = "done") -> None:
+    """Publish the ack of `epoch` at `stage` (what this component sent is in it)."""
+    msg = ack(agent, component, epoch, stage, bus)
+    await publish(bus, keys.epoch_ack(agent, component), msg, block=True)
+
+
+async def announce_ready(
+    bus: Bus, agent: str, component: str, started: Callable[[], bool], every: float = READY_EVERY
+) -> None:
+    """Say `ready` (the start barrier, epoch -1) until `started()`: the world may come
+    up after us, so one announcement could be lost."""
+    clock = WallClock()
+    while not started():
+        await send_ack(bus, agent, component, -1, "ready")
+        await clock.sleep(every)
