@@ -1,6 +1,7 @@
 """The executor as a real process over Zenoh: it runs a plan in the real world, checks
 conditions against the beliefs it is sent, reports every step, stops on an early arrest.
-The test plays the scheduler: it turns percepts into beliefs and sends the plan.
+The test plays the scheduler, a lockstep member: it turns percepts into beliefs, sends
+the plan, and acknowledges each epoch with what it sent (`cbdi.lockstep`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from cbdi import keys
 from cbdi.beliefs import BeliefSet, to_wire
 from cbdi.bus import BusConfig, LogSink, messages, open_bus, publish, request
 from cbdi.bus.base import Bus
+from cbdi.lockstep import announce_ready, send_ack
 from cbdi.wire.agent import ActionStatus, ArrestReport, Check, EarlyArrest, PartialPlan, PlanStep
 from cbdi.wire.world import Percepts, StatsRequest, WorldStats
 from cbdi_scheduler.events import revise_from_percepts
@@ -66,7 +68,7 @@ def corridor_plan(pickup_cell: str = "c_4_1") -> PartialPlan:
 
 
 async def play_scheduler(
-    bus: Bus, plan: PartialPlan, arrest_after: str = "", until: str = "s8"
+    bus: Bus, plan: PartialPlan, arrest_after: str = "", until: str = "s8", settle: float = 0.0
 ) -> tuple[list[ActionStatus], ArrestReport | None]:
     """Send beliefs every epoch and the plan once; collect statuses until `until` ends."""
     sink = LogSink()
@@ -91,12 +93,15 @@ async def play_scheduler(
             if not sent:
                 await publish(bus, keys.scheduler_plans("robot1"), plan, block=True)
                 sent = True
+            await send_ack(bus, "robot1", "scheduler", p.epoch, "beliefs")
+            await send_ack(bus, "robot1", "scheduler", p.epoch, "done")
 
     async def watch_arrest() -> None:
         nonlocal report
         _, report = await anext(arrests)
 
     feeder = asyncio.create_task(feed())
+    ready = asyncio.create_task(announce_ready(bus, "robot1", "scheduler", lambda: False))
     arrester = asyncio.create_task(watch_arrest())
     try:
         async with asyncio.timeout(60):
@@ -113,9 +118,11 @@ async def play_scheduler(
                     break
         if arrest_after:
             await asyncio.wait_for(arrester, 10)
+        await asyncio.sleep(settle)  # the world runs on (we keep acking): nothing may start
     finally:
         feeder.cancel()
         arrester.cancel()
+        ready.cancel()
     return seen, report
 
 
@@ -138,6 +145,10 @@ async def _run(
         "--agent",
         "robot1",  # type: ignore[operator]
         "--lockstep",
+        "--member",
+        "robot1/executor",
+        "--member",
+        "robot1/scheduler",
         "--speed",
         "20",
         "--no-stop-when-done",
@@ -148,11 +159,10 @@ async def _run(
     bus = await open_bus(BusConfig(connect=(router,)))
     try:
         wait_for(lambda: "event=ready" in world.output(), what="world ready")
-        player = asyncio.create_task(play_scheduler(bus, plan, **kw))
+        player = asyncio.create_task(play_scheduler(bus, plan, settle=settle, **kw))
         await asyncio.sleep(0.3)
         executor = spawn("executor", "cbdi-executor", "--agent", "robot1", env=env)  # type: ignore[operator]
         seen, report = await player
-        await asyncio.sleep(settle)  # let the world run on: nothing more may start
         stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats)
         assert executor.alive()
         return seen, report, stats

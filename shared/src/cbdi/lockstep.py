@@ -29,6 +29,7 @@ from cbdi import keys
 from cbdi.bus.base import Bus
 from cbdi.bus.typed import Stamped, publish
 from cbdi.clock import WallClock
+from cbdi.view import world_info
 from cbdi.wire.base import Message
 from cbdi.wire.world import ACK_STAGES, EpochAck, Percepts, Tick
 
@@ -103,6 +104,8 @@ class EpochGate:
         self.sender_of = sender_of
         self.senders: dict[str, _Sender] = {}
         self.changed = asyncio.Condition()
+        # The world's lockstep members: what others send is let through at every gate.
+        self.members: set[str] = set()
 
     def _of(self, sender: str) -> _Sender:
         return self.senders.setdefault(sender, _Sender())
@@ -164,6 +167,10 @@ class EpochGate:
         async with self.changed:
             for need in needs:
                 result.messages += self._take(need)
+            needed = {n.sender for n in needs}
+            for sender in sorted(self.senders):  # not in lockstep: no ack to wait for
+                if sender != WORLD and sender not in needed and sender not in self.members:
+                    result.messages += self._take(Need(sender, -1))
         return result
 
     def _take(self, need: Need) -> list[tuple[str, Message]]:
@@ -231,6 +238,12 @@ class Lockstep:
         self.keep_ticks = keep_ticks  # a component that never waits for the world drops them
         self.on: bool | None = None
         self.early: list[Stamped] = []
+
+    async def learn_members(self, bus: Bus, timeout: float = 30.0) -> list[str]:
+        """Ask the world who is in lockstep (its info); the gate waits for those only."""
+        info = await world_info(bus, timeout)
+        self.gate.members = set(info.members)
+        return list(info.members)
 
     def decided(self) -> bool:
         """Whether the first tick came (the start barrier is behind us)."""

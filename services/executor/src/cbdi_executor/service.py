@@ -88,9 +88,12 @@ class ExecutorService:
     async def epochs(self, first: int) -> None:
         """Lockstep: the executor's part of each epoch, once the scheduler's is done."""
         scheduler = keys.member(self.agent, "scheduler")
+        members = await self.lockstep.learn_members(self.ctx.bus)
         epoch = first
         while True:
-            needs = [Need(WORLD, epoch), Need(scheduler, epoch)]
+            needs = [Need(WORLD, epoch)]
+            if scheduler in members:
+                needs.append(Need(scheduler, epoch))
             released = await self.lockstep.gate.wait(needs, self.ack_timeout)
             if released.late:
                 self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))

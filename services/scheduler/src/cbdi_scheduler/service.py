@@ -137,8 +137,11 @@ class SchedulerService:
         plans and status: plans to the executor (stage `done`).
         """
         a = self.agent
+        if not self.members:
+            self.members = await self.lockstep.learn_members(self.ctx.bus)
+        self.lockstep.gate.members = set(self.members)
         own = [keys.member(a, c) for c in ("executor", "planner")]
-        executor, planner = (m if not self.members or m in self.members else "" for m in own)
+        executor, planner = (m if m in self.members else "" for m in own)
         peers = sorted(
             m for m in self.members if m.endswith("/scheduler") and m != keys.member(a, "scheduler")
         )

@@ -128,13 +128,14 @@ class _Epochs:
         """Lockstep: once the scheduler's beliefs of an epoch (and the executor's
         reports of the one before) are in, handle them, plan for the epoch, acknowledge."""
         a = self.agent
-        needs_of = lambda k: [  # noqa: E731
-            Need(keys.member(a, "executor"), k - 1),
-            Need(keys.member(a, "scheduler"), k, "beliefs"),
-        ]
+        members = await self.lockstep.learn_members(self.ctx.bus)
+        executor, scheduler = keys.member(a, "executor"), keys.member(a, "scheduler")
         epoch = first
         while True:
-            released = await self.lockstep.gate.wait(needs_of(epoch), self.ack_timeout)
+            needs = [Need(executor, epoch - 1)] if executor in members else []
+            if scheduler in members:
+                needs.append(Need(scheduler, epoch, "beliefs"))
+            released = await self.lockstep.gate.wait(needs, self.ack_timeout)
             if released.late:
                 self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
             for key, msg in released.messages:
