@@ -213,6 +213,8 @@ def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> 
         "2",
         "--known-litter",
         "2",
+        "--people-jitter",  # the scenario's jitter off: steps exactly every move_step
+        "0",
         "--json",
         "--quiet",
         "--record",
@@ -232,12 +234,22 @@ def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> 
     assert first.depth == 2
     from cbdi.wire.world import WorldSnapshot
 
-    person1 = [
-        decode(m.payload, WorldSnapshot).people[0].cell
+    people = [
+        [tuple(p.cell) for p in decode(m.payload, WorldSnapshot).people]
         for m in read_messages(rec, ["cbdi/world/snapshot"])
     ][:17]
+    person1 = [cells[0] for cells in people]
     moves_at = [i for i in range(1, len(person1)) if person1[i] != person1[i - 1]]
     assert moves_at[:2] == [8, 16]  # one step every 8 epochs
+    # The scenario's people_phase: the world started people where seed 1 puts them.
+    from cbdi_world.chance import Chance
+    from cbdi_world.maps import load_map
+    from cbdi_world.world import AgentSpec, World
+
+    paper = load_map(REPO / "domains/recycling/maps/paper-7x7.toml")
+    phased = World(paper, [AgentSpec("robot1", (0, 1))], seed=1, chance=Chance(people_phase=True))
+    assert people[0] == [p.cell for p in phased.people]
+    assert people[0] != [p.path[0] for p in paper.people]  # seed 1 moves person2
 
 
 def test_bdi_agent_plans_then_acts_in_offline_mode() -> None:

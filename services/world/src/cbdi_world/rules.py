@@ -4,7 +4,8 @@ They follow the recycling domain: `move` to a 4-adjacent cell (it fails if, when
 completes, the cell holds a wall, a bin, a person or another agent); `litter_pickup` of an
 item in the agent's cell while it holds fewer than `capacity` items (the item leaves the
 cell at start, is held at end); `recycle` of a held item from a cell next to a bin (it
-leaves the hand at start, is recycled at end).
+leaves the hand at start, is recycled at end). An action the world fails at random
+(`fail`) ends as if it never happened: the robot stays, the item is back where it was.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from cbdi.wire.world import ActionRequest, Cell
 if TYPE_CHECKING:
     from cbdi_world.world import AgentState, World
 
-__all__ = ["Action", "check_request", "complete"]
+__all__ = ["Action", "check_request", "complete", "fail"]
 
 _DIRS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 
@@ -114,6 +115,22 @@ def complete(world: World, agent: AgentState, action: Action) -> tuple[str, str]
     world.recycled.append(action.item or "")
     agent.count("recycled")
     return "succeeded", ""
+
+
+def fail(world: World, agent: AgentState, action: Action, reason: str) -> tuple[str, str]:
+    """End `action` as failed, undoing what it did at start; return (status, reason).
+
+    A move leaves the robot in its cell; a pickup leaves the item on the ground of the cell
+    it was taken from; a recycle leaves the item in the hand.
+    """
+    item = action.item or ""
+    if action.name == "pickup":
+        world.in_hand.discard(item)
+        world.litter[item] = action.source
+    elif action.name == "recycle":
+        agent.holding.append(item)  # still counted in `world.in_hand`, as while recycling
+    agent.count("failed")
+    return "failed", reason
 
 
 def _complete_move(world: World, agent: AgentState, action: Action) -> tuple[str, str]:

@@ -30,6 +30,7 @@ from cbdi.wire.world import (
     WorldInfoRequest,
 )
 from cbdi_world.acks import AckTracker, members_of
+from cbdi_world.chance import Chance
 from cbdi_world.errors import UnknownAgentError, WorldError
 from cbdi_world.maps import load_map, with_situation
 from cbdi_world.trace import RequestTrace
@@ -47,7 +48,9 @@ class WorldSettings(ServiceSettings):
         default=(), metadata={"help": "agent NAME or NAME:DEPTH, placed on the map's start cells"}
     )
     speed: float = field(default=1.0, metadata={"help": "simulated s per wall s; 0 = flat out"})
-    seed: int = field(default=0, metadata={"help": "seed of the random litter"})
+    seed: int = field(
+        default=0, metadata={"help": "seed of the random litter and of the options below"}
+    )
     max_time: float = field(default=0.0, metadata={"help": "end the run at this simulated time"})
     stop_when_done: bool = field(default=True, metadata={"help": "end when all litter recycled"})
     lockstep: bool = field(
@@ -69,6 +72,19 @@ class WorldSettings(ServiceSettings):
     )
     spawn: float = field(
         default=-1.0, metadata={"help": "probability of new litter per epoch (-1: map's)"}
+    )
+    people_phase: bool = field(
+        default=False, metadata={"help": "people start at a seeded cell of their loop"}
+    )
+    people_jitter: int = field(
+        default=0, metadata={"help": "people step up to N epochs early or late (seeded)"}
+    )
+    duration_noise: float = field(
+        default=0.0,
+        metadata={"help": "stretch actions by a seeded 0..F of their duration (whole epochs)"},
+    )
+    failure_probability: float = field(
+        default=0.0, metadata={"help": "chance that an accepted action fails at its end"}
     )
 
 
@@ -249,7 +265,13 @@ def build_world(settings: WorldSettings) -> World:
     agents = settings.agent or ("robot1",)
     specs = agent_specs(agents, world_map.agent_starts, world_map.detection_depth)
     members_of(settings.member, [s.name for s in specs])  # every member names an agent
-    return World(world_map, specs, seed=settings.seed)
+    chance = Chance(
+        people_phase=settings.people_phase,
+        people_jitter=settings.people_jitter,
+        duration_noise=settings.duration_noise,
+        failure_probability=settings.failure_probability,
+    )
+    return World(world_map, specs, seed=settings.seed, chance=chance)
 
 
 def world_main(world: World) -> ServiceMain:
@@ -264,6 +286,10 @@ def world_main(world: World) -> ServiceMain:
             speed=settings.speed,
             lockstep=settings.lockstep,
             seed=settings.seed,
+            people_phase=settings.people_phase,
+            people_jitter=settings.people_jitter,
+            duration_noise=settings.duration_noise,
+            failure_probability=settings.failure_probability,
         )
         WorldService(ctx, world, settings).start()
 

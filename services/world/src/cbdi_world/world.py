@@ -3,14 +3,15 @@
 `request` answers an action request at once (accepted with its end time, or rejected with
 the reason); `step` advances one epoch: due actions complete (in order of end time, then
 agent name), people advance along their loops, litter may appear, bodies glide, and every
-agent senses the square around it. Same map, agents, seed and requests: the same run.
+agent senses the square around it. Same map, agents, seed, `Chance` and requests: the
+same run (what the seed samples is in `cbdi_world.chance`).
 """
 
 from __future__ import annotations
 
 import random
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from cbdi.wire.world import (
     ActionOutcome,
@@ -27,10 +28,11 @@ from cbdi.wire.world import (
     WorldSnapshot,
     WorldStats,
 )
+from cbdi_world.chance import Chance, countdown, epochs_of, fails, start_index, stream
 from cbdi_world.errors import UnknownAgentError, WorldError
 from cbdi_world.maps import WorldMap
 from cbdi_world.physics import Physics
-from cbdi_world.rules import Action, check_request, complete
+from cbdi_world.rules import Action, check_request, complete, fail
 
 __all__ = ["AgentSpec", "EpochResult", "World"]
 
@@ -92,24 +94,25 @@ class World:
         agents: Sequence[AgentSpec],
         *,
         seed: int = 0,
+        chance: Chance | None = None,
         physics_substeps: int = 4,
     ) -> None:
         self.map = world_map
         self.epoch = 0
         self.time = 0.0
-        self.rng = random.Random(seed)
+        self.seed = seed
+        self.chance = chance or Chance()
+        self.rng = random.Random(seed)  # litter only: a seed spawns what it always did
+        self._streams: dict[str, random.Random] = {}
         self.agents: dict[str, AgentState] = {}
-        self.people = [
-            PersonState(p.name, p.path, p.move_step, countdown=p.move_step)
-            for p in world_map.people
-        ]
+        self.blocked_static = world_map.walls | set(world_map.bins.values())
+        self.people = self._start_people({*world_map.agent_starts, *(a.start for a in agents)})
         self.occupant: dict[Cell, str] = {p.cell: p.name for p in self.people}
         self.litter: dict[str, Cell] = {n: c for n, (c, _) in world_map.litter.items()}
         self.known = {n for n, (_, k) in world_map.litter.items() if k}
         self.in_hand: set[str] = set()
         self.recycled: list[str] = []
         self.spawned = 0
-        self.blocked_static = world_map.walls | set(world_map.bins.values())
         for spec in agents:
             self._place(spec)
         self.physics = Physics(physics_substeps, self._contact)
@@ -117,6 +120,33 @@ class World:
             self.physics.add(a.spec.name, a.cell, robot=True)
         for p in self.people:
             self.physics.add(p.name, p.cell, robot=False)
+
+    def _stream(self, purpose: str) -> random.Random:
+        """Return the seeded generator of `purpose`, created on first use."""
+        if purpose not in self._streams:
+            self._streams[purpose] = stream(self.seed, purpose)
+        return self._streams[purpose]
+
+    def _start_people(self, agent_starts: set[Cell]) -> list[PersonState]:
+        """Put each person on its loop: `path[0]`, or a seeded free cell with `people_phase`.
+
+        A phased person avoids agents' start cells, the cells of people placed before it
+        and those of people who stand still (they have no other cell); the map guarantees
+        that for `path[0]`, and walls and bins are never on a path.
+        """
+        people: list[PersonState] = []
+        taken = set(agent_starts) | {p.path[0] for p in self.map.people if len(p.path) < 2}
+        for p in self.map.people:
+            index = 0
+            if self.chance.people_phase and len(p.path) > 1:
+                index = start_index(p.path, taken, self._stream(f"people-phase:{p.name}"))
+                taken.add(p.path[index])
+            wait = countdown(p.move_step, self.chance.people_jitter, self._jitter(p.name))
+            people.append(PersonState(p.name, p.path, p.move_step, index, wait))
+        return people
+
+    def _jitter(self, person: str) -> random.Random:
+        return self._stream(f"people-jitter:{person}")
 
     def _place(self, spec: AgentSpec) -> None:
         if spec.name in self.agents:
@@ -149,6 +179,8 @@ class World:
         if action is None:
             agent.count("rejected")
             return ActionReply(request_id=req.request_id, accepted=False, reason=reason)
+        if self.chance.duration_noise > 0:
+            action = self._stretched(req.agent, action)
         agent.action = action
         if action.name == "pickup":  # at start: the item leaves the cell (domain semantics)
             del self.litter[action.item or ""]
@@ -161,6 +193,16 @@ class World:
             starts_at=action.starts_at,
             ends_at=action.ends_at,
         )
+
+    def _stretched(self, agent: str, action: Action) -> Action:
+        """Return `action` lasting its noisy duration, ending on an epoch boundary.
+
+        The end is computed as `step` computes epoch times, so it matches one exactly.
+        """
+        e = self.map.epoch_duration
+        rng = self._stream(f"durations:{agent}")
+        k = epochs_of(self.map.durations[action.name], e, self.chance.duration_noise, rng)
+        return replace(action, ends_at=(self.epoch + k) * e)
 
     def step(self) -> EpochResult:
         """Advance one epoch and return what happened."""
@@ -200,7 +242,7 @@ class World:
             action = agent.action
             assert action is not None
             agent.action = None
-            status, reason = complete(self, agent, action)
+            status, reason = self._end(agent, action)
             outcomes.append(
                 ActionOutcome(
                     agent=agent.spec.name,
@@ -216,6 +258,13 @@ class World:
             )
         return outcomes
 
+    def _end(self, agent: AgentState, action: Action) -> tuple[str, str]:
+        """Complete `action`, unless the seeded failure draw (one per action) fails it."""
+        p = self.chance.failure_probability
+        if fails(p, self._stream(f"failures:{agent.spec.name}")):
+            return fail(self, agent, action, f"random failure (p={p:g})")
+        return complete(self, agent, action)
+
     def _move_people(self) -> None:
         for p in self.people:
             if len(p.path) < 2:
@@ -229,7 +278,7 @@ class World:
             del self.occupant[p.cell]
             p.index = nxt
             self.occupant[p.cell] = p.name
-            p.countdown = p.move_step
+            p.countdown = countdown(p.move_step, self.chance.people_jitter, self._jitter(p.name))
 
     def _spawn_litter(self) -> list[str]:
         if self.map.spawn_probability <= 0 or self.rng.random() >= self.map.spawn_probability:

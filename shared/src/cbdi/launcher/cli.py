@@ -15,7 +15,7 @@ import uvloop
 from cbdi.errors import ConfigError
 from cbdi.launcher.process import RESTART_POLICIES, RestartPolicy
 from cbdi.launcher.run import LaunchOptions, RunSummary, launch
-from cbdi.launcher.scenario import Scenario, find_scenario, load_scenario
+from cbdi.launcher.scenario import Scenario, check_chance, find_scenario, load_scenario
 
 __all__ = ["main"]
 
@@ -49,6 +49,19 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--det-area", type=int, help="agents' detection depth (paper: 1 to 3)")
     p.add_argument("--known-litter", type=int, help="litter items known at start (paper: 2, 3)")
     p.add_argument("--spawn", type=float, help="probability of new litter per epoch")
+    p.add_argument(
+        "--people-phase",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="people start at a seeded cell of their loop (not its first)",
+    )
+    p.add_argument("--people-jitter", type=int, help="people step up to N epochs early or late")
+    p.add_argument(
+        "--duration-noise", type=float, help="actions last a seeded 0..F longer (whole epochs)"
+    )
+    p.add_argument(
+        "--failure-probability", type=float, help="chance that an accepted action fails at its end"
+    )
     p.add_argument(
         "--mode",
         choices=("online", "offline"),
@@ -109,6 +122,10 @@ def _scenario(args: argparse.Namespace) -> Scenario:
         "spawn",
         "mode",
         "planning_speed",
+        "people_phase",
+        "people_jitter",
+        "duration_noise",
+        "failure_probability",
     ):
         value = getattr(args, name)
         if value is not None:
@@ -117,6 +134,10 @@ def _scenario(args: argparse.Namespace) -> Scenario:
         raise ConfigError("--speed", "speed", "must be > 0 (0, flat out, only with --lockstep)")
     if not math.isfinite(run.planning_speed) or run.planning_speed < 0:
         raise ConfigError("--planning-speed", "planning_speed", "must be a finite number > 0")
+    problems = check_chance(run)
+    if problems:
+        field, reason = problems[0]
+        raise ConfigError(f"--{field.replace('_', '-')}", field, reason)
     scenario = replace(scenario, run=run)
     return scenario.with_agents(args.agents) if args.agents else scenario
 

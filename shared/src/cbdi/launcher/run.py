@@ -101,6 +101,10 @@ def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessS
     world_args += ["--lockstep" if run.lockstep else "--no-lockstep"]
     world_args += ["--move-step", str(run.move_step), "--det-area", str(run.det_area)]
     world_args += ["--known-litter", str(run.known_litter), "--spawn", str(run.spawn)]
+    world_args += ["--people-phase" if run.people_phase else "--no-people-phase"]
+    world_args += ["--people-jitter", str(run.people_jitter)]
+    world_args += ["--duration-noise", str(run.duration_noise)]
+    world_args += ["--failure-probability", str(run.failure_probability)]
     for agent in scenario.agents:
         own = agent.detection_depth is not None and run.det_area < 0
         depth = f":{agent.detection_depth}" if own else ""

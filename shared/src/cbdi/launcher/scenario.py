@@ -13,6 +13,10 @@ A scenario lives in `domains/recycling/scenarios/<name>.toml`:
     move_step = 4        # the paper's situation: people's pace, detection depth,
     det_area = 1         #   and how many litter items are known at the start
     known_litter = 2
+    people_phase = true  # the seed also picks where on their loop people start,
+    people_jitter = 1    #   a +-1 epoch jitter of their steps,
+    duration_noise = 0.0 #   a 0..F stretch of action durations (experiments),
+    failure_probability = 0.0  # and actions failing at random (experiments)
     [[agents]]
     name = "robot1"
     kind = "scripted"    # which services make up the agent: scripted, or bdi with
@@ -29,9 +33,18 @@ from pathlib import Path
 from typing import Any
 
 from cbdi import keys
+from cbdi.chance import chance_problems
 from cbdi.errors import ConfigError
 
-__all__ = ["AGENT_KINDS", "AgentEntry", "RunSettings", "Scenario", "find_scenario", "load_scenario"]
+__all__ = [
+    "AGENT_KINDS",
+    "AgentEntry",
+    "RunSettings",
+    "Scenario",
+    "check_chance",
+    "find_scenario",
+    "load_scenario",
+]
 
 # Components each agent kind runs; the scripted agent stands in for a whole BDI agent and
 # takes the executor's place on the bus.
@@ -66,9 +79,18 @@ class RunSettings:
     spawn: float = -1.0  # probability of new litter per epoch (-1: the map's)
     mode: str = ""  # BDI agents' planning: online, offline ("": each agent file's)
     planning_speed: float = 0.0  # virtual time: expansions per simulated s (0: agent file's)
+    people_phase: bool = False  # people start at a seeded cell of their loop
+    people_jitter: int = 0  # people step up to N epochs early or late (seeded)
+    duration_noise: float = 0.0  # actions last a seeded 0..F longer (whole epochs)
+    failure_probability: float = 0.0  # accepted actions fail at their end with this chance
 
 
 PLANNING_MODES = ("", "online", "offline")
+
+
+def check_chance(run: RunSettings) -> list[tuple[str, str]]:
+    """Return `(field, reason)` for each of the world's chance options out of range."""
+    return chance_problems(run.people_jitter, run.duration_noise, run.failure_probability)
 
 
 @dataclass(frozen=True)
@@ -208,4 +230,9 @@ def _run(raw: Any, where: str) -> RunSettings:
     unknown = set(raw) - set(vars(base))
     if unknown:
         raise ConfigError(where, "run", f"unknown settings: {', '.join(sorted(unknown))}")
-    return replace(base, **values)
+    run = replace(base, **values)
+    problems = check_chance(run)
+    if problems:
+        field, reason = problems[0]
+        raise ConfigError(where, f"run.{field}", reason)
+    return run

@@ -1,0 +1,83 @@
+"""Scenario `[run]` keys and `cbdi up` flags of the world's chances reach `cbdi-world`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cbdi.errors import ConfigError
+from cbdi.launcher import cli
+from cbdi.launcher.run import _specs
+from cbdi.launcher.scenario import find_scenario, load_scenario
+from cbdi.runtime import load_config
+from cbdi_world.chance import Chance
+from cbdi_world.service import WorldSettings, build_world
+
+REPO = Path(__file__).resolve().parents[2]
+MAP = REPO / "domains" / "recycling" / "maps" / "paper-7x7.toml"
+
+
+def scenario_file(tmp_path: Path, run: str) -> Path:
+    path = tmp_path / "s.toml"
+    path.write_text(f'name = "s"\nmap = "{MAP}"\n[run]\n{run}\n[[agents]]\nname = "robot1"\n')
+    return path
+
+
+def world_of(argv: list[str]) -> Chance:
+    """Build the world `cbdi up ARGV` would start and return its chances."""
+    scenario = cli._scenario(cli._parser().parse_args(argv))
+    world_argv = next(s.argv for s in _specs(scenario, "tcp/127.0.0.1:1") if s.service == "world")
+    args = world_argv[world_argv.index("--map") :]
+    return build_world(load_config(WorldSettings, args, prog="w", section="world", env={})).chance
+
+
+def test_the_paper_scenario_samples_a_phase_and_a_jitter_of_its_people() -> None:
+    run = load_scenario(find_scenario("paper-7x7")).run
+    assert (run.people_phase, run.people_jitter) == (True, 1)
+    assert (run.duration_noise, run.failure_probability) == (0.0, 0.0)
+    assert world_of(["paper-7x7"]) == Chance(people_phase=True, people_jitter=1)
+
+
+def test_flags_override_the_scenario_and_reach_the_world() -> None:
+    argv = ["paper-7x7", "--no-people-phase", "--people-jitter", "3"]
+    argv += ["--duration-noise", "0.25", "--failure-probability", "0.1"]
+    assert world_of(argv) == Chance(
+        people_phase=False, people_jitter=3, duration_noise=0.25, failure_probability=0.1
+    )
+    assert world_of(["corridor"]) == Chance()  # off unless asked
+
+
+@pytest.mark.parametrize(
+    ("run", "field"),
+    [
+        ("people_jitter = -1", "run.people_jitter"),
+        ("people_jitter = true", "run.people_jitter"),
+        ("people_jitter = 1.5", "run.people_jitter"),
+        ("duration_noise = 11", "run.duration_noise"),
+        ("duration_noise = nan", "run.duration_noise"),
+        ("failure_probability = 1.0", "run.failure_probability"),
+        ("failure_probability = inf", "run.failure_probability"),
+        ("people_phase = 1", "run.people_phase"),
+    ],
+)
+def test_bad_run_values_name_the_key(tmp_path: Path, run: str, field: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        load_scenario(scenario_file(tmp_path, run))
+    assert caught.value.field == field
+
+
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["--people-jitter", "-1"],
+        ["--duration-noise", "-0.5"],
+        ["--duration-noise", "nan"],
+        ["--failure-probability", "1"],
+    ],
+)
+def test_bad_flags_exit_2_naming_the_flag(flags: list[str], capsys: pytest.CaptureFixture) -> None:
+    assert cli.main(["paper-7x7", *flags]) == cli.EXIT_USAGE
+    assert f"cbdi up: {flags[0]}: {flags[0][2:].replace('-', '_')}: expected" in (
+        capsys.readouterr().err
+    )
