@@ -45,7 +45,7 @@ class PlanningSettings:
     timeout: float = 30.0
     # Virtual time (lockstep): node expansions per simulated second of planning. The
     # planner gets this many per second of each epoch, online and offline alike.
-    planning_speed: float = 1000.0
+    planning_speed: float = 2500.0
 
 
 @dataclass(frozen=True)
