@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -81,3 +82,23 @@ def cbdi_up(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str
         cwd=REPO,
         stdin=subprocess.DEVNULL,
     )
+
+
+@contextlib.contextmanager
+def cpu_load(burners: int = 2) -> Iterator[None]:
+    """Keep `burners` processes spinning on the CPU (both cores of these machines) while
+    the block runs: results that hang on how busy the machine is show up here."""
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", "while True: pass"],
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        for _ in range(burners)
+    ]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()

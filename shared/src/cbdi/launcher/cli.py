@@ -12,10 +12,17 @@ from dataclasses import replace
 
 import uvloop
 
+from cbdi import keys
 from cbdi.errors import ConfigError
 from cbdi.launcher.process import RESTART_POLICIES, RestartPolicy
 from cbdi.launcher.run import LaunchOptions, RunSummary, launch
-from cbdi.launcher.scenario import Scenario, check_chance, find_scenario, load_scenario
+from cbdi.launcher.scenario import (
+    AGENT_KINDS,
+    Scenario,
+    check_chance,
+    find_scenario,
+    load_scenario,
+)
 
 __all__ = ["main"]
 
@@ -92,6 +99,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit in seconds")
     p.add_argument("--quiet", action="store_true", help="do not echo the services' logs")
     p.add_argument(
+        "--delay",
+        action="append",
+        default=[],
+        metavar="SERVICE=SECONDS",
+        help="start a service (e.g. robot1/scheduler) late, to try another start order",
+    )
+    p.add_argument(
         "--record",
         metavar="FILE",
         default="",
@@ -142,6 +156,25 @@ def _scenario(args: argparse.Namespace) -> Scenario:
     return scenario.with_agents(args.agents) if args.agents else scenario
 
 
+def _delays(entries: Sequence[str], scenario: Scenario) -> dict[str, float]:
+    """Parse `--delay SERVICE=SECONDS` entries; every service must be one of the run's."""
+    services = {keys.service_id(c, a.name) for a in scenario.agents for c in AGENT_KINDS[a.kind]}
+    delays: dict[str, float] = {}
+    for entry in entries:
+        service, _, value = entry.partition("=")
+        try:
+            seconds = float(value)
+        except ValueError:
+            seconds = -1.0
+        if service not in services or not (0 <= seconds <= 600):
+            known = ", ".join(sorted(services))
+            raise ConfigError(
+                "--delay", entry, f"expected SERVICE=SECONDS (0..600), SERVICE one of {known}"
+            )
+        delays[service] = seconds
+    return delays
+
+
 def _say_factory(quiet: bool) -> object:
     def say(service: str, line: str) -> None:
         if quiet and service != "launcher":
@@ -161,7 +194,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"cbdi up: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    try:
+        delays = _delays(args.delay, scenario)
+    except ConfigError as exc:
+        print(f"cbdi up: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     opts = LaunchOptions(
+        delays=delays,
         restart=policy,
         port=args.port,
         startup_timeout=args.startup_timeout,

@@ -51,6 +51,9 @@ class LaunchOptions:
     view: str = "none"
     quiet: bool = False
     record: str = ""
+    # Start these services (`robot1/scheduler`) this many wall seconds late: any start
+    # order must work (the world's start barrier waits for every member).
+    delays: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -254,9 +257,14 @@ async def _start_all(
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1
     for group in [*([p] for p in rest[:singles]), rest[singles:]]:
-        for proc in group:
-            await proc.start()
-            tg.create_task(proc.supervise())
+        late = sorted((opts.delays.get(p.spec.service, 0.0), i) for i, p in enumerate(group))
+        waited = 0.0
+        for delay, i in late:
+            if delay > waited:
+                await asyncio.sleep(delay - waited)
+                waited = delay
+            await group[i].start()
+            tg.create_task(group[i].supervise())
         await _wait_alive(live, group, opts)
     summary.result = "running"
     return bus
