@@ -274,8 +274,9 @@ def build_world(settings: WorldSettings) -> World:
     return World(world_map, specs, seed=settings.seed, chance=chance)
 
 
-def world_main(world: World) -> ServiceMain:
-    """Return the service body serving `world` (built before the bus is opened)."""
+def world_main(world: World, clock: Clock | None = None) -> ServiceMain:
+    """Return the service body serving `world` (built before the bus is opened); `clock`
+    paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read)."""
 
     async def body(ctx: ServiceContext) -> None:
         settings: WorldSettings = ctx.settings
@@ -291,6 +292,6 @@ def world_main(world: World) -> ServiceMain:
             duration_noise=settings.duration_noise,
             failure_probability=settings.failure_probability,
         )
-        WorldService(ctx, world, settings).start()
+        WorldService(ctx, world, settings, clock).start()
 
     return body
