@@ -221,9 +221,9 @@ def _matches(expr: list[str], key: list[str]) -> bool:
 class Lockstep:
     """A component's mode, decided by the world's first tick, and its gate.
 
-    Until the first `Tick` inputs wait; then, in lockstep, they all go to the gate and
-    `start(first_epoch)` starts the component's epoch loop; in real time `put` hands each
-    input back at once, to be handled in arrival order as before.
+    From the first `Tick` on, in lockstep, inputs go to the gate and `start(first_epoch)`
+    starts the component's epoch loop; in real time (and before any tick) `put` hands
+    each input back at once, to be handled in arrival order as before.
     """
 
     def __init__(
@@ -237,7 +237,6 @@ class Lockstep:
         self.start = start
         self.keep_ticks = keep_ticks  # a component that never waits for the world drops them
         self.on: bool | None = None
-        self.early: list[Stamped] = []
 
     async def learn_members(self, bus: Bus, timeout: float = 30.0) -> list[str]:
         """Ask the world who is in lockstep (its info); the gate waits for those only."""
@@ -250,19 +249,20 @@ class Lockstep:
         return self.on is not None
 
     async def put(self, item: Stamped) -> list[tuple[str, Message]]:
-        """Take one input; return those to handle now (real time), else none."""
+        """Take one input; return those to handle now (real time), else none.
+
+        Before the first tick inputs are handled at once: a planner used on its own, with
+        no world, works as before, and in a lockstep run nothing but acks comes earlier.
+        """
         msg = item.message
         if self.on is None:
-            self.early.append(item)
             if not isinstance(msg, Tick):
-                return []
+                return [(item.key, msg)]
             self.on = msg.lockstep
-            early, self.early = self.early, []
             if not self.on:
-                return [(i.key, i.message) for i in early]
-            for e in early:
-                if self.keep_ticks or not isinstance(e.message, Tick):
-                    await self.gate.put(e)
+                return [(item.key, msg)]
+            if self.keep_ticks:
+                await self.gate.put(item)
             self.start(msg.epoch)
             return []
         if self.on:
