@@ -166,7 +166,11 @@ def test_early_arrest_waits_for_steps_up_to_the_arrest_point() -> None:
     out = finish(d, start(d, 1.0, FREE), 2.0)
     assert out.arrest is not None and out.arrest.last_step == "s1"
     assert out.arrest.cancelled == ["s2"]
-    assert d.early_arrest("other", "s0", 2.0).arrest is None  # not the current plan
+    # Not the current plan: nothing of it runs, so it is reported stopped at once (a
+    # scheduler waiting for the report to swap plans would otherwise wait for good).
+    other = d.early_arrest("other", "s0", 2.0).arrest
+    assert other is not None and other.plan_id == "other" and other.last_step == ""
+    assert other.cancelled == []
 
 
 def test_checks_and_bindings() -> None:

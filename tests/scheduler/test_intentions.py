@@ -137,3 +137,33 @@ def test_achieved_and_stale_messages() -> None:
 def test_unknown_policy_is_refused() -> None:
     with pytest.raises(ValueError, match="preemption"):
         IntentionScheduler("sometimes")
+
+
+def test_a_replacement_in_several_parts_waits_whole_and_runs_whole() -> None:
+    """Every part of a repair that comes while the old plan stops is kept, in order, and
+    only one arrest is asked (parts used to overwrite each other: a tail ran alone)."""
+    s = running()
+    first = s.on_plan(plan("r1", "t1", "t2", baseline="s1", after="s1"))
+    assert kinds(first) == ["arrest"]
+    assert s.on_plan(plan("r1", "t3", baseline="r1")) == []  # no second arrest
+    out = s.on_arrested(arrested("p1", "s1"))
+    assert kinds(out) == ["execute", "execute"]
+    assert [s.step_id for c in out if c.plan for s in c.plan.steps] == ["t1", "t2", "t3"]
+    assert s.current is not None and s.current.plan_id == "r1"
+
+
+def test_a_step_refused_while_its_replacement_waits_lets_the_replacement_take_over() -> None:
+    """The step the repair was made for fails: no new search from scratch; the repair runs
+    once the executor reports the old plan stopped (no idle robot after a repair)."""
+    s = running()
+    assert kinds(s.on_plan(plan("r1", "t1", baseline="s1", after="s1"))) == ["arrest"]
+    assert s.on_status(status("p1", "s2", "refused", "over all condition")) == []
+    out = s.on_arrested(arrested("p1", "s1"))
+    assert kinds(out) == ["execute"] and out[0].plan is not None and out[0].plan.plan_id == "r1"
+
+
+def test_a_report_of_another_plan_does_not_start_the_waiting_one() -> None:
+    s = running()
+    s.on_plan(plan("r1", "t1", baseline="s1", after="s1"))
+    assert s.on_arrested(arrested("old", "")) == []  # not the plan being stopped
+    assert kinds(s.on_arrested(arrested("p1", "s1"))) == ["execute"]

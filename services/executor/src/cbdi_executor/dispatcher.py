@@ -167,6 +167,11 @@ class Dispatcher:
         """Start nothing after `after_step`; report once nothing runs any more."""
         out = Effects()
         if plan_id != self.plan_id:
+            # Not (or no longer) ours: nothing of it runs, so it has stopped already. Say
+            # so, or a scheduler waiting to swap plans would wait for good.
+            out.arrest = ArrestReport(
+                agent=self.agent, plan_id=plan_id, last_step="", time=now, cancelled=[]
+            )
             return out
         self.arrest = (plan_id, after_step)
         self._maybe_report_arrest(now, out)

@@ -61,7 +61,8 @@ class IntentionScheduler:
         self.preemption = preemption
         self.plan_retries, self.exec_retries = plan_retries, exec_retries
         self.current: Intention | None = None
-        self.pending_plan: PartialPlan | None = None  # waits for the executor to stop
+        # A replacement plan's parts, waiting for the executor to stop the current plan.
+        self.pending: list[PartialPlan] = []
         self.next_desire: Desire | None = None  # waits for a clean preemption
         self.stopping = False
         self.retry_reason = ""  # a failed search waits for the beliefs to change
@@ -100,7 +101,7 @@ class IntentionScheduler:
     def _start(self, desire: Desire) -> list[Command]:
         self.retry_reason = ""
         self.current = Intention(desire)
-        self.pending_plan = None
+        self.pending = []
         return [Command("start_search", desire)]
 
     def _arrest_now(self) -> list[Command]:
@@ -120,7 +121,10 @@ class IntentionScheduler:
             return []
         if not cur.plan_id or plan.baseline == cur.plan_id or plan.plan_id == cur.plan_id:
             return self._pass_on(plan)
-        self.pending_plan = plan
+        if self.pending and plan.plan_id == self.pending[0].plan_id:
+            self.pending.append(plan)  # more of the replacement: it waits with the rest
+            return []
+        self.pending = [plan]
         self.stopping = True
         after = plan.applies_after or cur.last_started
         return [
@@ -172,6 +176,10 @@ class IntentionScheduler:
             cur.last_started = status.step_id
         if status.status not in ("failed", "refused"):
             return []
+        if self.pending:
+            # A replacement for this plan is waiting for it to stop, and now it has: the
+            # replacement (made for what made this step fail) takes over, no new search.
+            return []
         cur.exec_failures += 1
         if cur.exec_failures > self.exec_retries:
             return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
@@ -185,12 +193,12 @@ class IntentionScheduler:
             desire, self.next_desire = self.next_desire, None
             self.current = None
             return self._start(desire)
-        plan, self.pending_plan = self.pending_plan, None
         cur = self.current
-        if plan is None or cur is None:
-            return []
+        if not self.pending or cur is None or report.plan_id != cur.plan_id:
+            return []  # nothing waits, or the report is of another (older) plan
+        waiting, self.pending = self.pending, []
         cur.plan_id, cur.steps, cur.last_started = "", [], ""
-        return self._pass_on(plan)
+        return [c for plan in waiting for c in self._pass_on(plan)]
 
     # -- ends ----------------------------------------------------------------------------
     def achieved(self) -> list[Command]:
