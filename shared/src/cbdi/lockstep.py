@@ -29,6 +29,7 @@ from cbdi import keys
 from cbdi.bus.base import Bus
 from cbdi.bus.typed import Stamped, publish
 from cbdi.clock import WallClock
+from cbdi.errors import CbdiError
 from cbdi.view import world_info
 from cbdi.wire.base import Message
 from cbdi.wire.world import ACK_STAGES, EpochAck, Percepts, Tick
@@ -48,6 +49,7 @@ __all__ = [
 
 WORLD = "world"  # the sender name of everything the world publishes
 READY_EVERY = 0.5  # wall seconds between `ready` announcements (the barrier only)
+ASK_WORLD = 2.0  # wall seconds to wait for the world's info before epoch 0
 MAX_SENT_KEYS = 64
 
 
@@ -170,7 +172,7 @@ class EpochGate:
             needed = {n.sender for n in needs}
             for sender in sorted(self.senders):  # not in lockstep: no ack to wait for
                 if sender != WORLD and sender not in needed and sender not in self.members:
-                    result.messages += self._take(Need(sender, -1))
+                    result.messages += self._take_all(sender)
         return result
 
     def _take(self, need: Need) -> list[tuple[str, Message]]:
@@ -186,8 +188,12 @@ class EpochGate:
             )
             head, s.buffer = s.buffer[:cut], s.buffer[cut:]
             return [(i.key, i.message) for i in _in_order(head)]
-        ack = self._ack_for(need) if need.epoch >= 0 else None
-        limit = ack.sent if ack is not None else None
+        if need.epoch < 0:  # the start: only what came before its `ready` (nothing, usually)
+            ready = s.acks.get((-1, stage_rank("ready")))
+            limit: dict[str, int] | None = dict(ready.sent) if ready is not None else {}
+        else:
+            ack = self._ack_for(need)
+            limit = ack.sent if ack is not None else None  # late: take what is here
         taken: list[Stamped] = []
         kept: list[Stamped] = []
         for item in s.buffer:
@@ -196,6 +202,12 @@ class EpochGate:
             else:
                 kept.append(item)  # sent after that ack: a later gate's
         s.buffer = kept
+        return [(i.key, i.message) for i in _in_order(taken)]
+
+    def _take_all(self, sender: str) -> list[tuple[str, Message]]:
+        """Everything buffered from a sender that is not in lockstep (no ack to wait for)."""
+        s = self._of(sender)
+        taken, s.buffer = s.buffer, []
         return [(i.key, i.message) for i in _in_order(taken)]
 
 
@@ -222,8 +234,8 @@ class Lockstep:
     """A component's mode, decided by the world's first tick, and its gate.
 
     From the first `Tick` on, in lockstep, inputs go to the gate and `start(first_epoch)`
-    starts the component's epoch loop; in real time (and before any tick) `put` hands
-    each input back at once, to be handled in arrival order as before.
+    starts the component's epoch loop; in real time `put` hands each input back at once,
+    to be handled in arrival order as before.
     """
 
     def __init__(
@@ -232,9 +244,14 @@ class Lockstep:
         start: Callable[[int], object],
         sender_of: Callable[[str], str] = default_sender,
         keep_ticks: bool = True,
+        bus: Bus | None = None,
+        me: str = "",
     ) -> None:
         self.gate = EpochGate(key_exprs, sender_of)
         self.start = start
+        self.bus, self.me = bus, me  # to ask the world whether `me` is in lockstep
+        self.lockstep_member: bool | None = None
+        self.early: list[Stamped] = []
         self.keep_ticks = keep_ticks  # a component that never waits for the world drops them
         self.on: bool | None = None
 
@@ -251,25 +268,56 @@ class Lockstep:
     async def put(self, item: Stamped) -> list[tuple[str, Message]]:
         """Take one input; return those to handle now (real time), else none.
 
-        Before the first tick inputs are handled at once: a planner used on its own, with
-        no world, works as before, and in a lockstep run nothing but acks comes earlier.
+        The world's first tick decides the mode. An input that comes before it (other
+        senders' messages may overtake the world's) asks the world's info whether we are
+        a lockstep member: then it waits for the tick in the gate; with no world to ask
+        (a planner used on its own) or not a member, it is handled at once.
         """
         msg = item.message
         if self.on is None:
-            if not isinstance(msg, Tick):
-                return [(item.key, msg)]
-            self.on = msg.lockstep
-            if not self.on:
-                return [(item.key, msg)]
-            if self.keep_ticks:
-                await self.gate.put(item)
-            self.start(msg.epoch)
-            return []
+            if isinstance(msg, EpochAck):
+                await self.gate.put(item)  # acks only matter in lockstep: keep them
+                return []
+            if isinstance(msg, Tick):
+                return await self._decide(item, msg)
+            if await self._member_of_lockstep():
+                self.early.append(item)
+                return []
+            self.on = False
+            return [*self._flush(), (item.key, msg)]
         if self.on:
             if self.keep_ticks or not isinstance(msg, Tick):
                 await self.gate.put(item)
             return []
         return [(item.key, msg)]
+
+    async def _decide(self, item: Stamped, tick: Tick) -> list[tuple[str, Message]]:
+        self.on = tick.lockstep
+        if not self.on:
+            return [*self._flush(), (item.key, tick)]
+        for e in [*self.early, item]:
+            if self.keep_ticks or not isinstance(e.message, Tick):
+                await self.gate.put(e)
+        self.early = []
+        self.start(tick.epoch)
+        return []
+
+    def _flush(self) -> list[tuple[str, Message]]:
+        early, self.early = self.early, []
+        return [(e.key, e.message) for e in early]
+
+    async def _member_of_lockstep(self) -> bool:
+        if self.lockstep_member is None:
+            if self.bus is None or not self.me:
+                self.lockstep_member = False
+            else:
+                try:
+                    info = await world_info(self.bus, ASK_WORLD)
+                except (TimeoutError, CbdiError):
+                    self.lockstep_member = False  # no world: on our own, in real time
+                else:
+                    self.lockstep_member = info.lockstep and self.me in info.members
+        return self.lockstep_member
 
 
 def ack(agent: str, component: str, epoch: int, stage: str, bus: Bus) -> EpochAck:

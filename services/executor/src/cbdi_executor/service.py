@@ -63,7 +63,10 @@ class ExecutorService:
         self.acked = -1
         self.ack_timeout = ack_timeout
         self.lockstep = Lockstep(
-            self.input_keys(), lambda first: ctx.start(self.epochs(first), name="epochs")
+            self.input_keys(),
+            lambda first: ctx.start(self.epochs(first), name="epochs"),
+            bus=ctx.bus,
+            me=keys.member(agent, "executor"),
         )
 
     def input_keys(self) -> list[str]:

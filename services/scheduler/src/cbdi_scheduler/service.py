@@ -77,7 +77,10 @@ class SchedulerService:
         self.ack_timeout = ack_timeout
         self.members: list[str] = []  # the world's lockstep members (from its info)
         self.lockstep = Lockstep(
-            self.input_keys(), lambda first: ctx.start(self.epochs(first), name="epochs")
+            self.input_keys(),
+            lambda first: ctx.start(self.epochs(first), name="epochs"),
+            bus=ctx.bus,
+            me=keys.member(mind.agent, "scheduler"),
         )
 
     def input_keys(self) -> list[str]:
@@ -105,6 +108,8 @@ class SchedulerService:
             return
         self.mind.beliefs = self.mind.beliefs.adding(map_beliefs(info))
         self.members = list(info.members)
+        me = keys.member(self.agent, "scheduler")
+        self.lockstep.lockstep_member = info.lockstep and me in info.members
         self.ctx.log.info("map_loaded", map=info.map_name, cells=info.width * info.height)
 
     async def run(self, stream: AsyncIterator[Stamped], load_map: bool) -> None:

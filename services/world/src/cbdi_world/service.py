@@ -121,7 +121,7 @@ class WorldService:
         self.agents = [a for a in world.info().agents]
         self.members = members_of(settings.member, self.agents)
         self.acks = AckTracker(self.members)
-        self.info = replace(world.info(), members=list(self.members))
+        self.info = replace(world.info(), members=list(self.members), lockstep=settings.lockstep)
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
 

@@ -169,8 +169,10 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     epoch_duration: float
     durations: dict[str, float]
     known_litter: list[LitterView] = []  # litter agents know of at the start
-    # Lockstep: the members (`agent/component`) whose acks every epoch waits for.
+    # The members (`agent/component`) the start barrier, and in lockstep every epoch,
+    # waits for.
     members: list[str] = []
+    lockstep: bool = False
 
 
 Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]

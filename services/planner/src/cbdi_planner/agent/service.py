@@ -101,6 +101,8 @@ class _Epochs:
             lambda first: self.ctx.start(self.epochs(first), name="epochs"),
             sender_of,
             keep_ticks=False,
+            bus=self.ctx.bus,
+            me=keys.member(self.agent, "planner"),
         )
 
     def lockstep_keys(self) -> list[str]:
