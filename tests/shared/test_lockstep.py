@@ -1,0 +1,98 @@
+"""The epoch gate: what an ack covers is released, in the sender's order, nothing else."""
+
+from __future__ import annotations
+
+from cbdi.bus.typed import Stamped
+from cbdi.lockstep import WORLD, EpochGate, Need
+from cbdi.wire.agent import BeliefsUpdate
+from cbdi.wire.base import Message
+from cbdi.wire.world import EpochAck, Percepts, Tick
+
+BELIEFS = "cbdi/r1/scheduler/beliefs"
+PLANS = "cbdi/r1/scheduler/plans"
+S = "r1/scheduler"
+
+
+def beliefs(epoch: int) -> BeliefsUpdate:
+    return BeliefsUpdate(
+        agent="r1", epoch=epoch, time=float(epoch), instances={}, facts=[], fluents=[]
+    )
+
+
+def ack(epoch: int, sent: dict[str, int], stage: str = "done") -> Stamped:
+    msg = EpochAck(agent="r1", component="scheduler", epoch=epoch, stage=stage, sent=sent)  # type: ignore[arg-type]
+    return Stamped("cbdi/r1/scheduler/ack", 1, 0, msg)
+
+
+def item(key: str, seq: int, order: int, msg: Message) -> Stamped:
+    return Stamped(key, seq, order, msg)
+
+
+async def test_an_ack_releases_what_it_covers_in_the_senders_order() -> None:
+    gate = EpochGate([BELIEFS, PLANS, "cbdi/r1/scheduler/ack"])
+    # Two subscriptions deliver out of the sender's order: the plan (order 2) first.
+    await gate.put(item(PLANS, 1, 2, beliefs(0)))
+    await gate.put(item(BELIEFS, 1, 1, beliefs(0)))
+    await gate.put(item(BELIEFS, 2, 3, beliefs(1)))  # epoch 1's: after the ack below
+    assert not gate.met(Need(S, 0))
+    await gate.put(ack(0, {BELIEFS: 1, PLANS: 1, "cbdi/r1/scheduler/desires": 5}))
+    assert gate.met(Need(S, 0))  # the desires it sent are not ours to wait for
+    released = await gate.wait([Need(S, 0)], timeout=1)
+    assert [k for k, _ in released.messages] == [BELIEFS, PLANS] and not released.late
+    await gate.put(ack(1, {BELIEFS: 2, PLANS: 1}))
+    later = await gate.wait([Need(S, 1)], timeout=1)
+    assert [(k, m.epoch) for k, m in later.messages] == [(BELIEFS, 1)]  # type: ignore[attr-defined]
+
+
+async def test_an_ack_waits_for_the_messages_it_counts() -> None:
+    gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
+    await gate.put(ack(0, {BELIEFS: 1}))  # the ack overtook the beliefs
+    assert not gate.met(Need(S, 0))
+    await gate.put(item(BELIEFS, 1, 1, beliefs(0)))
+    assert gate.met(Need(S, 0))
+
+
+async def test_the_start_takes_only_what_came_before_ready() -> None:
+    gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
+    await gate.put(ack(-1, {}, stage="ready"))
+    await gate.put(item(BELIEFS, 1, 1, beliefs(0)))  # epoch 0's, early
+    assert (await gate.wait([Need(S, -1)], timeout=1)).messages == []
+    await gate.put(ack(0, {BELIEFS: 1}))
+    assert len((await gate.wait([Need(S, 0)], timeout=1)).messages) == 1
+
+
+async def test_the_world_is_released_up_to_the_agents_percepts() -> None:
+    gate = EpochGate(["cbdi/world/clock", "cbdi/world/*/r1"])
+    tick = Tick(epoch=0, time=0.0, epoch_duration=1.0, speed=0.0, lockstep=True)
+    seen = Percepts(
+        agent="r1",
+        epoch=0,
+        time=0.0,
+        position=(0, 0),
+        depth=1,
+        free=[],
+        blocked=[],
+        litter=[],
+        holding=[],
+    )
+    await gate.put(item("cbdi/world/clock", 1, 1, tick))
+    assert not gate.met(Need(WORLD, 0))
+    await gate.put(item("cbdi/world/percepts/r1", 1, 2, seen))
+    released = await gate.wait([Need(WORLD, 0)], timeout=1)
+    assert [type(m).__name__ for _, m in released.messages] == ["Tick", "Percepts"]
+
+
+async def test_a_late_sender_is_named_and_what_came_is_taken() -> None:
+    gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
+    await gate.put(item(BELIEFS, 1, 1, beliefs(0)))
+    released = await gate.wait([Need(S, 0)], timeout=0.05)
+    assert released.late == [S] and len(released.messages) == 1
+
+
+async def test_senders_outside_lockstep_are_let_through() -> None:
+    gate = EpochGate([BELIEFS, "cbdi/r1/planner/plans"])
+    gate.members = {S}
+    await gate.put(item("cbdi/r1/planner/plans", 1, 1, beliefs(0)))  # not a member
+    await gate.put(item(BELIEFS, 1, 1, beliefs(0)))  # a member: waits for its ack
+    released = await gate.wait([], timeout=1)
+    assert [k for k, _ in released.messages] == ["cbdi/r1/planner/plans"]
