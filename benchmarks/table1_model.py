@@ -160,8 +160,8 @@ class Run:
         return self.result == "done" and self.moves is not None and self.sim_time is not None
 
 
-_TASK_COLUMNS = ("situation", "move_step", "det_area", "known_litter", "mode", "seed")
-_TASK_COLUMNS += ("clock", "planning_factor")
+_TASK_COLUMNS: tuple[str, ...] = ("situation", "move_step", "det_area", "known_litter")
+_TASK_COLUMNS += ("mode", "seed", "clock", "planning_factor")
 _RUN_FIELDS = tuple(f.name for f in fields(Run) if f.name != "task")
 COLUMNS: tuple[str, ...] = _TASK_COLUMNS + _RUN_FIELDS
 _INTS = {"exit", "moves", "recycled", "plans", "replans", "forecast_repairs", "improvements"}

@@ -23,7 +23,7 @@ import time
 import tomllib
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TextIO
 
@@ -202,19 +202,16 @@ def run_task(task: Task, options: UpOptions, ports: PortPool) -> Run:
     with ports.lease() as port:
         argv = up_argv(task, options, port)
         code, out, err, wall = execute(argv, options.run_timeout + GRACE)
-    given = {
-        "planning_speed": planning_speed_of(task, options),
-        "up_args": shlex.join(options.up_args),
-        "wall": round(wall, 3),
-    }
+    speed, up_args = planning_speed_of(task, options), shlex.join(options.up_args)
     summary = summary_of(out)
     if summary is None:
         result = "killed" if code == -9 else "no_summary"
-        tail = err.strip().splitlines()[-3:]
-        return with_reason(
-            Run(task, result, exit=code, **given), f"exit {code}: {' | '.join(tail)}"
-        )
-    run = run_from_summary(task, summary, code, **given)
+        tail = " | ".join(err.strip().splitlines()[-3:])
+        run = Run(task, result, exit=code, planning_speed=speed, up_args=up_args)
+        return with_reason(replace(run, wall=round(wall, 3)), f"exit {code}: {tail}")
+    run = run_from_summary(
+        task, summary, code, planning_speed=speed, up_args=up_args, wall=round(wall, 3)
+    )
     return with_reason(run, run.reason) if run.reason else run
 
 
