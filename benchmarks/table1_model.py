@@ -152,6 +152,8 @@ class Run:
     replans_improve: int | None = None
     forecast_repairs: int | None = None
     improvements: int | None = None
+    stalls: int | None = None  # epochs a lockstep member missed its ack timeout
+    trace_digest: str = ""  # the world's request trace: equal digests, equal runs
     wall: float = 0.0  # seconds; kept in the CSV for the running time, never in a table
 
     @property
@@ -165,6 +167,7 @@ _TASK_COLUMNS += ("mode", "seed", "clock", "planning_factor")
 _RUN_FIELDS = tuple(f.name for f in fields(Run) if f.name != "task")
 COLUMNS: tuple[str, ...] = _TASK_COLUMNS + _RUN_FIELDS
 _INTS = {"exit", "moves", "recycled", "plans", "replans", "forecast_repairs", "improvements"}
+_INTS |= {"stalls"}
 _INTS |= {f"replans_{p}" for p in REPLAN_PURPOSES}
 _FLOATS = {"planning_speed", "sim_time", "wall"}
 
@@ -186,6 +189,8 @@ def run_from_summary(task: Task, summary: dict[str, Any], exit_code: int, **give
         replans=planner.get("replans"),
         forecast_repairs=planner.get("forecast_repairs"),
         improvements=planner.get("improvements"),
+        stalls=sum(summary["stalls"].values()) if isinstance(summary.get("stalls"), dict) else None,
+        trace_digest=str(summary.get("trace_digest", "")),
         **{f"replans_{p}": by.get(p) for p in REPLAN_PURPOSES},
         **given,
     )

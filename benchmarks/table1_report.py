@@ -76,6 +76,7 @@ def moves_table(rows: Sequence[Row], static: Bound | None) -> list[str]:
         "situation (move,det,known)",
         "runs off/on",
         "failed off/on",
+        "distinct traces off/on",
         "offline moves mean ± sd [95% CI]",
         "online moves mean ± sd [95% CI]",
         "online - offline [95% CI]",
@@ -94,6 +95,7 @@ def moves_table(rows: Sequence[Row], static: Bound | None) -> list[str]:
                 r.situation.label,
                 f"{r.offline.runs}/{r.online.runs}",
                 f"{r.offline.failed}/{r.online.failed}",
+                f"{r.offline.traces}/{r.online.traces}",
                 _mean_sd_ci(r.offline.moves),
                 _mean_sd_ci(r.online.moves),
                 _diff(r.moves_diff),
@@ -228,7 +230,9 @@ def _header(runs: Sequence[Run], bounds: Sequence[Bound]) -> list[str]:
         f"{LEVEL:.0%} percentile bootstrap of the mean ({BOOTSTRAP_RESAMPLES} resamples, "
         f"numpy seed {BOOTSTRAP_SEED}); *online - offline* pairs runs by seed. A verdict "
         f"needs the paired interval to exclude zero and at least {MIN_PAIRS} pairs. The "
-        "paper's mu and sigma are over its 4 runs; its mu+ is offline mu - online mu.",
+        "paper's mu and sigma are over its 4 runs; its mu+ is offline mu - online mu. "
+        "*Distinct traces* counts different world request traces (equal traces, equal "
+        "runs): seeds that only reseed a deterministic world give one.",
         "",
     ]
     if static is None or static.moves is None:

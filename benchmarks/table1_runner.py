@@ -29,6 +29,8 @@ from typing import TextIO
 
 from table1_model import Run, Task, run_from_summary, summary_of, with_reason
 
+from cbdi.agentfile import PlanningSettings
+
 __all__ = [
     "CBDI",
     "PortPool",
@@ -63,12 +65,19 @@ class UpOptions:
 
 
 def agent_planning_speed(agent_file: Path | None) -> float | None:
-    """Return `[planning] planning_speed` of an agent file (expansions per simulated s)."""
+    """Return the agent's planning speed (expansions per simulated second), if it has one.
+
+    The agent file's `[planning] planning_speed` when it sets one, else the default the
+    agent-file reader fills in (`PlanningSettings`), which is what the planner then uses.
+    """
     if agent_file is None or not agent_file.is_file():
         return None
     with agent_file.open("rb") as handle:
         value = tomllib.load(handle).get("planning", {}).get("planning_speed")
-    return float(value) if isinstance(value, int | float) else None
+    if isinstance(value, int | float):
+        return float(value)
+    default = getattr(PlanningSettings(), "planning_speed", None)
+    return float(default) if isinstance(default, int | float) else None
 
 
 def up_supports(flag: str) -> bool:

@@ -34,6 +34,7 @@ class ModeStats:
 
     runs: int
     failures: tuple[str, ...]  # "seed 3: killed", in seed order
+    traces: int  # distinct request traces among the runs that report one
     moves: Sample
     sim_time: Sample
 
@@ -70,6 +71,7 @@ def mode_stats(runs: Sequence[Run]) -> ModeStats:
     return ModeStats(
         runs=len(runs),
         failures=failures,
+        traces=len({r.trace_digest for r in runs if r.trace_digest}),
         moves=describe([float(r.moves or 0) for r in done]),
         sim_time=describe([float(r.sim_time or 0.0) for r in done]),
     )

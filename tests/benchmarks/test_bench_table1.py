@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from cbdi.agentfile import PlanningSettings
 from pngcheck import read_png
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,6 +46,8 @@ SUMMARY = {
     "result": "done",
     "reason": "",
     "sim_time": 107.0,
+    "trace_digest": "9f2c",
+    "stalls": {"robot1/planner": 2, "robot1/executor": 1},
     "stats": {"agents": {"robot1": {"moves": 48, "pickups": 3, "recycled": 3}}},
     "planner": {
         "agents": {
@@ -157,7 +160,7 @@ def test_failed_runs_are_counted_named_and_left_out_of_means_and_pairs() -> None
 def test_the_markdown_shows_failures_verdicts_paper_and_bounds() -> None:
     runs = [fake_run(t) for t in _tasks(seeds=5)]
     text = report.render_markdown(runs, fake_bounds(_tasks(seeds=5)))
-    assert "| 4,1,2 | 5/5 | 0/1 |" in text
+    assert "| 4,1,2 | 5/5 | 0/1 | 0/0 |" in text  # the fake runs report no trace
     assert "- x1 4,1,2 online seed 3: no_summary" in text
     assert "56.0 ± 2.3" in text and "13.5" in text  # the paper's mu, sigma and mu+
     assert "22 moves, makespan 34.0" in text
@@ -246,6 +249,7 @@ def test_a_summary_gives_the_robots_and_its_planners_counts() -> None:
     run = model.run_from_summary(task, SUMMARY, 0, planning_speed=None)
     assert (run.result, run.moves, run.sim_time, run.recycled) == ("done", 48, 107.0, 3)
     assert (run.replans_new, run.replans_repair, run.forecast_repairs) == (4, 2, 2)
+    assert (run.trace_digest, run.stalls) == ("9f2c", 3)
     assert run.ok
     empty = model.run_from_summary(task, {"result": "failed"}, 1)
     assert empty.moves is None and not empty.ok
@@ -278,8 +282,8 @@ def test_the_agent_files_planning_speed_is_read_when_present(tmp_path: Path) -> 
     agent = tmp_path / "a.toml"
     agent.write_text("[planning]\nmode = 'online'\nplanning_speed = 500\n")
     assert runner.agent_planning_speed(agent) == 500.0
-    agent.write_text("[planning]\nmode = 'online'\n")
-    assert runner.agent_planning_speed(agent) is None
+    agent.write_text("[planning]\nmode = 'online'\n")  # the reader's default applies
+    assert runner.agent_planning_speed(agent) == PlanningSettings().planning_speed
     assert runner.agent_planning_speed(None) is None
 
 
