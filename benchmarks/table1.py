@@ -211,6 +211,7 @@ def _real(args: argparse.Namespace) -> tuple[Runner, BoundMaker]:
         default_speed=default,
         pass_speed=supported and default is not None,
         run_timeout=args.run_timeout,
+        lockstep_speed=args.speed,
     )
     forced = args.clairvoyant
     clairvoyant = forced if forced is not None else not args.up_args
@@ -250,6 +251,16 @@ def _positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _speed(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
     return value
 
 
@@ -323,6 +334,13 @@ def _parser() -> argparse.ArgumentParser:
         type=_positive_float,
         default=900.0,
         help="wall seconds per `cbdi up` (default 900)",
+    )
+    p.add_argument(
+        "--speed",
+        type=_speed,
+        default=0.0,
+        help="simulated s per wall s of the lockstep runs (default 0: flat out; in virtual "
+        "time the run is the same at any speed, its trace digest says so)",
     )
     p.add_argument("--scenario", default="paper-7x7", help="scenario (default paper-7x7)")
     p.add_argument("--csv", type=Path, default=DEFAULT_CSV, help="the runs' CSV (outputs beside)")

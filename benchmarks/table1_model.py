@@ -140,6 +140,7 @@ class Run:
     reason: str = ""
     exit: int = 0
     planning_speed: float | None = None  # passed as --planning-speed; None: the agent's
+    speed: float | None = None  # passed as --speed (0: flat out); None: the scenario's
     up_args: str = ""
     moves: int | None = None
     sim_time: float | None = None
@@ -169,19 +170,19 @@ COLUMNS: tuple[str, ...] = _TASK_COLUMNS + _RUN_FIELDS
 _INTS = {"exit", "moves", "recycled", "plans", "replans", "forecast_repairs", "improvements"}
 _INTS |= {"stalls"}
 _INTS |= {f"replans_{p}" for p in REPLAN_PURPOSES}
-_FLOATS = {"planning_speed", "sim_time", "wall"}
+_FLOATS = {"planning_speed", "speed", "sim_time", "wall"}
 
 
-def run_from_summary(task: Task, summary: dict[str, Any], exit_code: int, **given: Any) -> Run:
-    """Read a `cbdi up --json` summary: the robot's counts and its planner's."""
+def run_from_summary(given: Run, summary: dict[str, Any]) -> Run:
+    """Fill a run (task, exit, what was passed) from a `cbdi up --json` summary."""
     robot = summary.get("stats", {}).get("agents", {}).get("robot1", {})
     planner = summary.get("planner", {}).get("agents", {}).get("robot1", {})
     by = planner.get("replans_by", {})
-    return Run(
-        task=task,
+    stalls = summary.get("stalls")
+    return replace(
+        given,
         result=str(summary.get("result", "no_summary")),
         reason=str(summary.get("reason", "")),
-        exit=exit_code,
         moves=robot.get("moves"),
         sim_time=summary.get("sim_time"),
         recycled=robot.get("recycled"),
@@ -189,10 +190,9 @@ def run_from_summary(task: Task, summary: dict[str, Any], exit_code: int, **give
         replans=planner.get("replans"),
         forecast_repairs=planner.get("forecast_repairs"),
         improvements=planner.get("improvements"),
-        stalls=sum(summary["stalls"].values()) if isinstance(summary.get("stalls"), dict) else None,
+        stalls=sum(stalls.values()) if isinstance(stalls, dict) else None,
         trace_digest=str(summary.get("trace_digest", "")),
         **{f"replans_{p}": by.get(p) for p in REPLAN_PURPOSES},
-        **given,
     )
 
 

@@ -220,7 +220,7 @@ def _header(runs: Sequence[Run], bounds: Sequence[Bound]) -> list[str]:
     lines = [
         "# Table I: offline (plan, then act) against online (continual) planning",
         "",
-        f"{len(lock)} lockstep runs: seeds {_seeds(seeds)}, planning speed factors "
+        f"{len(lock)} lockstep runs ({_pace(lock)}): seeds {_seeds(seeds)}, planning speed factors "
         f"{', '.join(f'x{f:g}' for f in factors_of(lock))}; world options passed through: "
         + (", ".join(f"`{a}`" for a in up_args) if up_args else "none")
         + ".",
@@ -246,6 +246,24 @@ def _header(runs: Sequence[Run], bounds: Sequence[Bound]) -> list[str]:
         )
     lines.append(_clairvoyant_note(bounds))
     return [*lines, ""]
+
+
+def _pace(runs: Sequence[Run]) -> str:
+    speeds = sorted({r.speed for r in runs if r.speed is not None})
+    named = [f"speed {s:g}" + (" (flat out)" if s == 0 else "") for s in speeds]
+    if any(r.speed is None for r in runs):
+        named.append("the scenario's speed")
+    return ", ".join(named) or "no runs"
+
+
+def stall_lines(runs: Sequence[Run]) -> list[str]:
+    """List the runs in which a lockstep member missed its ack timeout."""
+    out = [
+        f"- {r.task.describe()}: {r.stalls} stalled epochs"
+        for r in sorted(runs, key=lambda r: r.task.sort_key())
+        if r.stalls
+    ]
+    return out or ["- none"]
 
 
 def _clairvoyant_note(bounds: Sequence[Bound]) -> str:
@@ -284,6 +302,8 @@ def render_markdown(runs: Sequence[Run], bounds: Sequence[Bound]) -> str:
         lines += [f"## Mission time (simulated s), {title}", "", *time_table(mine, static), ""]
     lines += ["## Summary", "", *summary_lines(rows), ""]
     lines += ["## Failed runs", "", *failure_lines(rows), ""]
+    lines += ["## Lockstep stalls (an ack timeout: the run may hang on timing)", ""]
+    lines += [*stall_lines(runs), ""]
     lines += ["## Real time (`--speed 1 --no-lockstep`), planning speed x1", ""]
     lines += [*realtime_table(runs), ""]
     return "\n".join(lines)

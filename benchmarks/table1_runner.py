@@ -62,6 +62,7 @@ class UpOptions:
     default_speed: float | None = None  # the agent file's planning_speed
     pass_speed: bool = False  # `cbdi up` has --planning-speed and the default is known
     run_timeout: float = 900.0  # wall seconds per run (`cbdi up --timeout`)
+    lockstep_speed: float | None = None  # --speed of lockstep runs (None: the scenario's)
 
 
 def agent_planning_speed(agent_file: Path | None) -> float | None:
@@ -121,6 +122,8 @@ def up_argv(task: Task, options: UpOptions, port: int) -> list[str]:
     speed = planning_speed_of(task, options)
     if speed is not None:
         argv += ["--planning-speed", f"{speed:g}"]
+    if task.clock == "lockstep" and options.lockstep_speed is not None:
+        argv += ["--speed", f"{options.lockstep_speed:g}"]
     argv += list(options.up_args)
     if task.clock == "realtime":
         argv += list(REALTIME_ARGS)  # last, so a pass-through --speed cannot undo it
@@ -211,16 +214,21 @@ def run_task(task: Task, options: UpOptions, ports: PortPool) -> Run:
     with ports.lease() as port:
         argv = up_argv(task, options, port)
         code, out, err, wall = execute(argv, options.run_timeout + GRACE)
-    speed, up_args = planning_speed_of(task, options), shlex.join(options.up_args)
+    given = Run(
+        task,
+        "no_summary",
+        exit=code,
+        planning_speed=planning_speed_of(task, options),
+        speed=1.0 if task.clock == "realtime" else options.lockstep_speed,
+        up_args=shlex.join(options.up_args),
+        wall=round(wall, 3),
+    )
     summary = summary_of(out)
     if summary is None:
-        result = "killed" if code == -9 else "no_summary"
         tail = " | ".join(err.strip().splitlines()[-3:])
-        run = Run(task, result, exit=code, planning_speed=speed, up_args=up_args)
-        return with_reason(replace(run, wall=round(wall, 3)), f"exit {code}: {tail}")
-    run = run_from_summary(
-        task, summary, code, planning_speed=speed, up_args=up_args, wall=round(wall, 3)
-    )
+        result = "killed" if code == -9 else "no_summary"
+        return with_reason(replace(given, result=result), f"exit {code}: {tail}")
+    run = run_from_summary(given, summary)
     return with_reason(run, run.reason) if run.reason else run
 
 

@@ -66,7 +66,7 @@ SUMMARY = {
 def fake_run(task: Any) -> Any:
     """Moves and time as a function of the task; seed 3 online fails without a summary."""
     if task.mode == "online" and task.seed == 3:
-        return model.Run(task, "no_summary", reason="exit 1: router exited", exit=1)
+        return model.Run(task, "no_summary", reason="exit 1: router exited", exit=1, speed=0.0)
     online = task.mode == "online"
     moves = 50 - (8 if online else 0) + task.seed % 3 + task.situation.det_area
     return model.Run(
@@ -84,6 +84,8 @@ def fake_run(task: Any) -> Any:
         forecast_repairs=1 if online else 0,
         improvements=0,
         planning_speed=None if task.factor == 1 else 100.0 * task.factor,
+        speed=1.0 if task.clock == "realtime" else 0.0,
+        stalls=2 if (task.mode, task.seed) == ("offline", 2) else 0,
         wall=12.345,
     )
 
@@ -167,6 +169,8 @@ def test_the_markdown_shows_failures_verdicts_paper_and_bounds() -> None:
     assert "online is better on moves in 2 of 2 situations" in text
     assert "on mission time in 0 of 2 (offline faster: 2)" in text
     assert "wall" not in text and "12.345" not in text
+    assert "20 lockstep runs (speed 0 (flat out)): seeds 1..5" in text
+    assert "- 4,1,2 offline seed 2: 2 stalled epochs" in text
 
 
 def test_the_real_time_table_stands_beside_the_lockstep_runs() -> None:
@@ -246,12 +250,13 @@ def test_only_keeps_the_papers_row_order_and_drops_repeats() -> None:
 
 def test_a_summary_gives_the_robots_and_its_planners_counts() -> None:
     task = model.Task(S412, "online", 1)
-    run = model.run_from_summary(task, SUMMARY, 0, planning_speed=None)
+    run = model.run_from_summary(model.Run(task, "no_summary", speed=0.0), SUMMARY)
     assert (run.result, run.moves, run.sim_time, run.recycled) == ("done", 48, 107.0, 3)
     assert (run.replans_new, run.replans_repair, run.forecast_repairs) == (4, 2, 2)
     assert (run.trace_digest, run.stalls) == ("9f2c", 3)
     assert run.ok
-    empty = model.run_from_summary(task, {"result": "failed"}, 1)
+    assert run.speed == 0.0  # what was passed is kept
+    empty = model.run_from_summary(model.Run(task, "no_summary", exit=1), {"result": "failed"})
     assert empty.moves is None and not empty.ok
 
 
@@ -267,7 +272,11 @@ def test_planning_speeds_other_than_1_need_the_flag_and_a_default() -> None:
 
 def test_the_command_scales_the_planning_speed_and_ends_with_the_clock() -> None:
     options = runner.UpOptions(
-        up_args=("--speed", "40"), default_speed=400.0, pass_speed=True, run_timeout=60.0
+        up_args=("--speed", "40"),
+        default_speed=400.0,
+        pass_speed=True,
+        run_timeout=60.0,
+        lockstep_speed=0.0,
     )
     argv = runner.up_argv(model.Task(S813, "offline", 7, 0.25, "realtime"), options, 4242)
     text = " ".join(argv[1:])
@@ -276,6 +285,9 @@ def test_the_command_scales_the_planning_speed_and_ends_with_the_clock() -> None
     assert "--planning-speed 100 --speed 40 --speed 1 --no-lockstep" in text
     plain = runner.up_argv(model.Task(S813, "online", 1), runner.UpOptions(), 1)
     assert "--planning-speed" not in plain and "--no-lockstep" not in plain
+    assert "--speed" not in plain  # the scenario's pace unless one is given
+    flat = runner.up_argv(model.Task(S813, "online", 1), options, 1)
+    assert " ".join(flat).endswith("--planning-speed 400 --speed 0 --speed 40")
 
 
 def test_the_agent_files_planning_speed_is_read_when_present(tmp_path: Path) -> None:
