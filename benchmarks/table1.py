@@ -58,11 +58,12 @@ from table1_runner import (
     check_planning_speeds,
     run_all,
     run_task,
+    up_argv,
     up_supports,
 )
 from table1_summary import rows_of, static_of
 
-from cbdi.errors import ConfigError
+from cbdi.errors import CbdiError, ConfigError
 from cbdi.launcher.scenario import find_scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -126,24 +127,34 @@ def render(runs: Sequence[Run], bounds: Sequence[Bound], out: Outputs) -> str:
 
 
 def make_bounds(
-    tasks: list[Task],
-    *,
-    map_path: Path,
-    clairvoyant: bool,
-    skip_reason: str,
-    args: argparse.Namespace,
+    tasks: list[Task], *, map_path: Path, options: UpOptions, args: argparse.Namespace
 ) -> list[Bound]:
-    """Compute the static optimum and (unless skipped) the clairvoyant bounds."""
+    """Compute the static optimum and (unless --no-clairvoyant) the clairvoyant bounds.
+
+    A clairvoyant world that cannot be built is no reason to lose the runs: the column
+    is left out, with the reason in the table.
+    """
     bounds = [static_optimum(map_path, STATIC_TIMEOUT)]
-    if not clairvoyant:
-        return [*bounds, Bound("clairvoyant", None, None, None, None, "skipped", note=skip_reason)]
-    cases = {(t.situation.move_step, t.seed) for t in tasks if t.clock == "lockstep"}
-    texts = clairvoyant_problems(map_path, cases)
+    if not args.clairvoyant:
+        return [*bounds, _skipped("--no-clairvoyant")]
+    cases: dict[tuple[int, int], list[str]] = {}
+    for t in tasks:
+        if t.clock == "lockstep":  # the people's walk hangs on the pace and the seed only
+            cases.setdefault((t.situation.move_step, t.seed), up_argv(t, options, 0)[2:])
+    try:
+        texts = clairvoyant_problems(cases)
+    except (CbdiError, ValueError, StopIteration, SystemExit, TypeError, AttributeError) as exc:
+        print(f"clairvoyant column left out: {exc!r}", file=sys.stderr)
+        return [*bounds, _skipped(f"its world could not be built ({exc!r})")]
     progress = Progress(len(set(texts.values())), "clairvoyant")
     bounds += clairvoyant_bounds(
         texts, timeout=args.clairvoyant_timeout, jobs=args.jobs, step=progress.step
     )
     return bounds
+
+
+def _skipped(reason: str) -> Bound:
+    return Bound("clairvoyant", None, None, None, None, "skipped", note=reason)
 
 
 def reuse(args: argparse.Namespace, out: Outputs) -> int:
@@ -213,21 +224,7 @@ def _real(args: argparse.Namespace) -> tuple[Runner, BoundMaker]:
         run_timeout=args.run_timeout,
         lockstep_speed=args.speed,
     )
-    forced = args.clairvoyant
-    clairvoyant = forced if forced is not None else not args.up_args
-    skip = (
-        "--no-clairvoyant"
-        if forced is False
-        else "world options passed through (--up-arg) are not simulated by the harness; "
-        "--clairvoyant computes it anyway, from the world without them"
-    )
-    maker = partial(
-        make_bounds,
-        map_path=scenario.map_path,
-        clairvoyant=clairvoyant,
-        skip_reason=skip,
-        args=args,
-    )
+    maker = partial(make_bounds, map_path=scenario.map_path, options=options, args=args)
     return partial(run_task, options=options, ports=PortPool()), maker
 
 
@@ -320,8 +317,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--clairvoyant",
         action=argparse.BooleanOptionalAction,
-        default=None,
-        help="compute the clairvoyant bound (default: on unless --up-arg is given)",
+        default=True,
+        help="compute the clairvoyant bound (default on)",
     )
     p.add_argument(
         "--clairvoyant-timeout",

@@ -3,9 +3,11 @@
 - static optimum: every litter item known, no people; `cbdi problem MAP --litter all`
   planned by `cbdi plan --anytime` (22 moves on the paper's 7x7 map);
 - clairvoyant: every item known and the people's walk given to the planner as timed
-  initial literals. The walk comes from the world core (`cbdi_world.world.World`) with the
-  robot standing still on its start cell, so people are never held up by it; in a real
-  run a robot in the way makes a person wait, so this is a bound of a slightly different
+  initial literals. The walk comes from the world core (`cbdi_world.world.World`), built
+  from the run's own `cbdi up` flags (seeded phase and jitter included), with the robot
+  standing still on its start cell, so people are never held up by it; in a real run a
+  robot in the way makes a person wait, and actions take their domain durations here
+  (no duration noise, no random failures), so this is a bound of a slightly different
   world. The planner minimises makespan, not moves, within its time limit: the figure is
   the moves of the best plan it found, labelled so, never an optimum.
 
@@ -21,7 +23,7 @@ import hashlib
 import json
 import subprocess
 import tempfile
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -30,9 +32,9 @@ from typing import Any
 from table1_runner import CBDI, execute
 
 from cbdi.wire.world import Cell
-from cbdi_world.maps import WorldMap, load_map, with_situation
+from cbdi_world.maps import WorldMap
 from cbdi_world.problem import cell_name, problem_text
-from cbdi_world.world import AgentSpec, World
+from cbdi_world.world import World
 
 __all__ = [
     "HORIZON",
@@ -40,6 +42,7 @@ __all__ = [
     "clairvoyant_bounds",
     "clairvoyant_problem",
     "clairvoyant_problems",
+    "launcher_world",
     "people_timeline",
     "read_bounds",
     "static_optimum",
@@ -68,10 +71,32 @@ class Bound:
     note: str = ""
 
 
-def people_timeline(world_map: WorldMap, seed: int, horizon: int) -> tuple[Change, ...]:
-    """Return where each person stands at epoch 0 and every step up to `horizon`."""
-    start = world_map.agent_starts[0]
-    world = World(world_map, [AgentSpec("robot1", start, world_map.detection_depth)], seed=seed)
+def launcher_world(up_argv: Sequence[str]) -> World:
+    """Build the world `cbdi up UP_ARGV` would start, through the launcher's own parsing.
+
+    The launcher's parser and scenario overrides, its world command line, then the world
+    service's settings reader and builder: every option, passed through or the
+    scenario's own (people's phase and jitter), reaches this world as it reaches the
+    real one. Those are private helpers of `cbdi.launcher`; a test keeps this in step.
+    """
+    from cbdi.launcher import cli, run
+    from cbdi.runtime import load_config
+    from cbdi_world.service import WorldSettings, build_world
+
+    scenario = cli._scenario(cli._parser().parse_args(list(up_argv)))
+    spec = next(s for s in run._specs(scenario, "tcp/127.0.0.1:0") if s.service == "world")
+    argv = list(spec.argv)
+    settings = load_config(
+        WorldSettings, argv[argv.index("--map") :], prog="cbdi-world", section="world", env={}
+    )
+    return build_world(settings)
+
+
+def people_timeline(world: World, horizon: int) -> tuple[Change, ...]:
+    """Return where each person stands at epoch 0 and every step up to `horizon`.
+
+    The world is stepped with its robot never asked to act: it stands on its start cell.
+    """
     changes: list[Change] = [(0, p.name, p.cell) for p in world.people]
     where = {p.name: p.cell for p in world.people}
     for _ in range(horizon):
@@ -84,12 +109,21 @@ def people_timeline(world_map: WorldMap, seed: int, horizon: int) -> tuple[Chang
 
 
 def clairvoyant_problem(world_map: WorldMap, timeline: Sequence[Change]) -> str:
-    """Return the map's problem (all litter) with people's cells as timed literals."""
-    text = problem_text(world_map, litter="all", people=True, name=f"{world_map.name}-clairvoyant")
+    """Return the map's problem (all litter) with people's cells as timed literals.
+
+    People's cells at epoch 0 (wherever the seed put them on their loops) start
+    not free; each step frees the cell left and takes the cell entered.
+    """
+    text = problem_text(world_map, litter="all", name=f"{world_map.name}-clairvoyant")
     where: dict[str, Cell] = {}
     tils: list[str] = []
     for epoch, person, cell in timeline:
-        if epoch > 0:
+        if epoch == 0:
+            fact = f"\n    (free {cell_name(cell)})"
+            if fact not in text:
+                raise ValueError(f"{person} starts on {list(cell)}, which is not free")
+            text = text.replace(fact, "", 1)
+        else:
             tils.append(f"(at {epoch} (free {cell_name(where[person])}))")
             tils.append(f"(at {epoch} (not (free {cell_name(cell)})))")
         where[person] = cell
@@ -127,15 +161,13 @@ def static_optimum(map_path: Path, timeout: float) -> Bound:
 
 
 def clairvoyant_problems(
-    map_path: Path, cases: Iterable[tuple[int, int]], horizon: int = HORIZON
+    cases: Mapping[tuple[int, int], Sequence[str]], horizon: int = HORIZON
 ) -> dict[tuple[int, int], str]:
-    """Return the clairvoyant problem of each (move_step, seed), in case order."""
-    base = load_map(map_path)
+    """Return the clairvoyant problem of each (move_step, seed), from its `cbdi up` flags."""
     texts: dict[tuple[int, int], str] = {}
-    for move_step, seed in sorted(set(cases)):
-        world_map = with_situation(base, move_step=move_step)
-        timeline = people_timeline(world_map, seed, horizon)
-        texts[(move_step, seed)] = clairvoyant_problem(world_map, timeline)
+    for case, up_argv in sorted(cases.items()):
+        world = launcher_world(up_argv)
+        texts[case] = clairvoyant_problem(world.map, people_timeline(world, horizon))
     return texts
 
 

@@ -276,9 +276,10 @@ def _clairvoyant_note(bounds: Sequence[Bound]) -> str:
     timeout, horizon = clair[0].timeout, clair[0].horizon
     outlasting = sum(1 for b in clair if b.note)
     return (
-        "Clairvoyant best found: every item known and the people's walk (the world core "
-        f"with the robot standing still, {horizon} epochs) given as timed initial literals; "
-        f"the moves of the shortest-makespan plan `cbdi plan --anytime` found in {timeout:g} s, "
+        "Clairvoyant best found: every item known and the people's walk given as timed "
+        f"initial literals ({horizon} epochs of the world core built from each run's own "
+        "`cbdi up` flags, the robot standing still); the moves of the shortest-makespan plan "
+        f"`cbdi plan --anytime` found in {timeout:g} s, "
         "averaged over the row's seeds: a best found, not an optimum."
         + (f" {outlasting} plans outlast the horizon." if outlasting else "")
     )

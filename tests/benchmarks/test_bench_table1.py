@@ -342,22 +342,33 @@ def test_run_all_returns_every_run_sorted_whatever_the_finishing_order() -> None
 # ---------------------------------------------------------------- bounds
 
 
-def test_the_clairvoyant_problem_blocks_peoples_cells_while_they_stand_there() -> None:
-    from cbdi_world.maps import load_map, with_situation
+def _world(*flags: str) -> Any:
+    return bounds.launcher_world(["paper-7x7", "--move-step", "4", *flags])
 
-    world_map = with_situation(
-        load_map(ROOT / "domains/recycling/maps/paper-7x7.toml"), move_step=4
-    )
-    timeline = bounds.people_timeline(world_map, seed=1, horizon=8)
+
+def test_the_clairvoyant_problem_blocks_peoples_cells_while_they_stand_there() -> None:
+    world = _world("--seed", "1", "--no-people-phase", "--people-jitter", "0")
+    timeline = bounds.people_timeline(world, horizon=8)
     assert timeline[:2] == ((0, "person1", (4, 0)), (0, "person2", (6, 3)))
     assert (4, "person1", (3, 0)) in timeline and (8, "person1", (2, 0)) in timeline
-    text = bounds.clairvoyant_problem(world_map, timeline)
-    assert "(free c_4_0)" not in text.split("(at ")[0]  # blocked at the start
+    text = bounds.clairvoyant_problem(world.map, timeline)
+    init = {line.strip() for line in text.splitlines() if line.strip().startswith("(free")}
+    assert "(free c_4_0)" not in init and "(free c_6_3)" not in init  # taken at the start
+    assert "(free c_3_0)" in init and "(free c_0_1)" not in init  # the robot's cell
     assert "(at 4 (free c_4_0))" in text and "(at 4 (not (free c_3_0)))" in text
     assert "(at 8 (free c_3_0))" in text
-    assert (
-        "(:goal (and (recycled plastic_3_6) (recycled plastic_4_6) (recycled plastic_6_1)))" in text
-    )
+    goal = "(:goal (and (recycled plastic_3_6) (recycled plastic_4_6) (recycled plastic_6_1)))"
+    assert goal in text
+
+
+def test_the_clairvoyant_world_is_the_runs_world_seeded_phase_and_jitter_included() -> None:
+    world = _world("--seed", "3", "--people-jitter", "2")
+    assert world.chance.people_phase and world.chance.people_jitter == 2  # the scenario's phase
+    assert world.people[0].move_step == 4 and world.seed == 3
+    one = bounds.people_timeline(_world("--seed", "1"), horizon=40)
+    again = bounds.people_timeline(_world("--seed", "1"), horizon=40)
+    other = bounds.people_timeline(_world("--seed", "2"), horizon=40)
+    assert one == again and one != other
 
 
 def test_bounds_round_trip_through_their_csv(tmp_path: Path) -> None:
