@@ -61,9 +61,15 @@ bench-planner: venv
 bench-continual: venv
 	$(BIN)/python benchmarks/continual.py
 
-# The paper's Table I situations, offline and online, one run each, beside its numbers.
+# The paper's Table I with statistics: its 12 situations x offline/online x seeds 1..10 x
+# planning speeds 0.25, 1 and 4 (lockstep, 2 runs at a time), one real-time run per
+# situation and mode, the static optimum and clairvoyant bounds; writes table1.csv,
+# table1.md and table1.png to benchmarks/results/. Options, e.g.
+# make bench-table1 BENCH_TABLE1_ARGS="--seeds 2 --only '4,1,2 8,1,2' --planning-speeds 1"
+# or BENCH_TABLE1_ARGS="--reuse benchmarks/results/table1.csv" (re-render, run nothing).
+BENCH_TABLE1_ARGS ?=
 bench-table1: venv
-	$(BIN)/python benchmarks/table1.py
+	$(BIN)/python benchmarks/table1.py $(BENCH_TABLE1_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
