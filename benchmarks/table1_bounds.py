@@ -131,10 +131,15 @@ def clairvoyant_problem(world_map: WorldMap, timeline: Sequence[Change]) -> str:
     return text.replace(head, head + "\n    ".join(tils) + "\n    ", 1) if tils else text
 
 
+# The search is bounded by node expansions, so a bound is the same on any machine; the
+# timeout only guards against a runaway search (its status then says `timeout`).
+BOUND_EXPANSIONS = 20000
+
+
 def plan_moves(problem: Path, timeout: float) -> tuple[int | None, float | None, str]:
     """Plan a problem anytime; return the best plan's moves, makespan and the status."""
     argv = [CBDI, "plan", str(DOMAIN), str(problem), "--anytime", "--json"]
-    argv += ["--timeout", f"{timeout:g}"]
+    argv += ["--expansions", str(BOUND_EXPANSIONS), "--timeout", f"{max(timeout, 300):g}"]
     code, out, _, _ = execute(argv, timeout + 60)
     try:
         report: dict[str, Any] = json.loads(out)

@@ -262,3 +262,21 @@ def test_bdi_agent_plans_then_acts_in_offline_mode() -> None:
     planner = summary["planner"]["agents"]["robot1"]
     assert planner["plans"] >= 1 and planner["search_rounds"] == 0
     assert planner["forecast_repairs"] == 0
+
+
+def test_a_taken_router_port_fails_the_run_instead_of_joining_another(tmp_path: Path) -> None:
+    """Another run's router on our port: its `alive` token must not pass for ours, or our
+    world and robots would join that run (seen with parallel benchmark runs)."""
+    from tests_support import Proc, free_port
+
+    port = free_port()
+    other = Proc([str(CBDI), "router", "--listen", f"tcp/127.0.0.1:{port}"], tmp_path / "r.log")
+    try:
+        wait_for(lambda: "event=ready" in other.output(), what="the other router")
+        result = cbdi_up("corridor", "--port", str(port), "--json", "--quiet", "--restart", "never")
+    finally:
+        other.stop()
+    assert result.returncode == 1
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "failed" and "could not listen" in summary["reason"]
+    assert not summary["stats"]  # nothing ran on the other router

@@ -24,6 +24,7 @@ from typing import Any
 from cbdi import keys, tally
 from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, request
 from cbdi.bus.base import Bus
+from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.launcher.process import (
     ManagedProcess,
@@ -254,6 +255,7 @@ async def _start_all(
 
         tg.create_task(text_view(bus, sys.stdout))
     await _wait_alive(live, [router], opts)
+    await _router_is_ours(router, endpoint, opts)
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1
     for group in [*([p] for p in rest[:singles]), rest[singles:]]:
@@ -268,6 +270,19 @@ async def _start_all(
         await _wait_alive(live, group, opts)
     summary.result = "running"
     return bus
+
+
+async def _router_is_ours(router: ManagedProcess, endpoint: str, opts: LaunchOptions) -> None:
+    """Make sure our own router listens: the token `cbdi/alive/router` may be another
+    run's whose router took the port first (ours then cannot listen and exits), and our
+    services would join that run."""
+    clock = WallClock()
+    deadline = clock.now() + opts.startup_timeout
+    while not any("event=routing" in line for line in router.tail):
+        if router.failed.is_set() or clock.now() > deadline:
+            tail = " | ".join(router.tail) or "no output"
+            raise CbdiError(f"our router could not listen on {endpoint} (port taken?): {tail}")
+        await clock.sleep(0.05)
 
 
 async def _count(stream: AsyncIterator[tuple[str, Message]], planners: tally.PlannerTally) -> None:
