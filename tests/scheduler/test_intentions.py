@@ -157,9 +157,9 @@ def test_a_step_refused_while_its_replacement_waits_lets_the_replacement_take_ov
     once the executor reports the old plan stopped (no idle robot after a repair)."""
     s = running()
     assert kinds(s.on_plan(plan("r1", "t1", baseline="s1", after="s1"))) == ["arrest"]
-    assert s.on_status(status("p1", "s2", "refused", "over all condition")) == []
-    out = s.on_arrested(arrested("p1", "s1"))
+    out = s.on_status(status("p1", "s2", "refused", "over all condition"))
     assert kinds(out) == ["execute"] and out[0].plan is not None and out[0].plan.plan_id == "r1"
+    assert s.on_arrested(arrested("p1", "s1")) == []  # the late report changes nothing
 
 
 def test_a_report_of_another_plan_does_not_start_the_waiting_one() -> None:

@@ -177,9 +177,12 @@ class IntentionScheduler:
         if status.status not in ("failed", "refused"):
             return []
         if self.pending:
-            # A replacement for this plan is waiting for it to stop, and now it has: the
-            # replacement (made for what made this step fail) takes over, no new search.
-            return []
+            # A replacement was waiting for this plan to stop, and now it has (the
+            # executor drops the rest of a plan whose step failed): the replacement takes
+            # over at once, with no new search and no wait for an arrest report.
+            waiting, self.pending, self.stopping = self.pending, [], False
+            cur.plan_id, cur.steps, cur.last_started = "", [], ""
+            return [c for plan in waiting for c in self._pass_on(plan)]
         cur.exec_failures += 1
         if cur.exec_failures > self.exec_retries:
             return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
