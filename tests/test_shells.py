@@ -35,5 +35,5 @@ def test_the_planner_and_scheduler_build_their_shells_from_their_arguments() -> 
 def test_a_shell_refuses_a_missing_agent_file_by_name(tmp_path: object) -> None:
     missing = f"{tmp_path}/nowhere.toml"
     for build in shells().values():
-        with pytest.raises(AgentFileError, match="nowhere.toml"):
+        with pytest.raises(AgentFileError, match=r"nowhere\.toml"):
             build(["--agent", "robot1", "--agent-file", missing])  # type: ignore[operator]

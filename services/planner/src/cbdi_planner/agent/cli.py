@@ -26,8 +26,9 @@ PROG = "cbdi-planner serve"
 
 
 def shell(argv: Sequence[str] | None = None) -> TogetherService:
-    """Build the planner that `cbdi-planner serve ARGV` runs; raise CbdiError,
-    PlannerError or ValueError on bad settings, a bad agent file or a bad domain."""
+    """Build the planner that `cbdi-planner serve ARGV` runs; raise CbdiError or
+    ValueError on bad settings, a bad agent file or a bad domain (what callers outside
+    the planner know: the `cbdi.shells` contract)."""
     settings = load_config(
         PlannerSettings,
         argv,
@@ -42,7 +43,10 @@ def shell(argv: Sequence[str] | None = None) -> TogetherService:
     backend = settings.backend or raw.planning.backend
     if backend not in BACKENDS:
         raise CbdiError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
-    domain = parse_domain(raw.domain.read_text(encoding="utf-8"), str(raw.domain))
+    try:
+        domain = parse_domain(raw.domain.read_text(encoding="utf-8"), str(raw.domain))
+    except PlannerError as exc:
+        raise CbdiError(str(exc)) from exc
     service = keys.service_id("planner", settings.agent)
     return TogetherService(service, settings, planner_main(settings, domain, raw))
 
@@ -51,7 +55,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run until SIGTERM/SIGINT; exit 2 on a bad agent file, domain or settings."""
     try:
         built = shell(argv)
-    except (CbdiError, PlannerError, ValueError) as exc:
+    except (CbdiError, ValueError) as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
     return run_service(built.settings, built.service, built.main)
