@@ -128,6 +128,16 @@ def test_a_difference_is_named_by_field_and_epoch_and_measurements_are_not_one()
     assert compare(recorded, recorded).matched == 3
 
 
+def test_what_the_replay_sent_after_the_recording_ended_is_not_a_difference() -> None:
+    next_ack = encode(ack("scheduler", 1, "beliefs"))  # the run stopped before the original's
+    further = [*RUN, RecordedMessage(SCHED_ACK, next_ack, 9, 9, 5, "", "msgpack")]
+    members = ["robot1/scheduler"]
+    recorded = outputs_of(((m.key, m.seq, m.payload) for m in RUN), members)
+    replayed = outputs_of(((m.key, m.seq, m.payload) for m in further), members)
+    verdict = compare(recorded, replayed)
+    assert verdict.same and (verdict.matched, verdict.unverified) == (3, 1)
+
+
 def write(path: Path, items: list[RecordedMessage]) -> Path:
     rec = McapRecorder(path)
     for m in items:

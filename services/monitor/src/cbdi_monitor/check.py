@@ -33,13 +33,17 @@ from cbdi_monitor.reenact import (
     Output,
     Send,
     outputs_of,
+    sender_of,
     shell_args,
 )
 
 __all__ = ["Replayed", "describe", "load_shells", "reenact", "report"]
 
 SHELLS = "cbdi.shells"  # entry-point group: component name -> build(argv) -> TogetherService
-QUIET = 0.5  # wall seconds without a publication after the script: the replay is over
+# After the script, the replay is over once the network was quiet for QUIET wall seconds
+# with the members having published at least as many messages as recorded, or for
+# STRAGGLE seconds with fewer (a planner round may still be running in its thread).
+QUIET, STRAGGLE = 0.5, 5.0
 # The rebuilt services log errors only: once a replay differs, the recorded inputs no
 # longer fit what they decided, and every one of them would be a warning.
 LOG_LEVEL = "error"
@@ -122,7 +126,8 @@ async def reenact(
     async def play() -> None:
         try:
             replayed.stalled = await _play(script, network, acks, timeout)
-            await _quiet(network, clock)
+            expected = sum(len(outputs) for outputs in script.outputs.values())
+            await _quiet(network, script.members, expected, clock)
         finally:
             together.stop()
 
@@ -155,14 +160,22 @@ async def _play(script: AgentScript, network: MemoryNetwork, acks: _Acks, timeou
     return ""
 
 
-async def _quiet(network: MemoryNetwork, clock: Clock) -> None:
-    """Let the members finish what the last inputs set off: wait for `QUIET` s without a
-    publication on the network."""
-    count, since = len(network.published), clock.now()
-    while clock.now() - since < QUIET:
+async def _quiet(
+    network: MemoryNetwork, members: list[str], expected: int, clock: Clock
+) -> None:
+    """Let the members finish what the last inputs set off (see `QUIET`): `expected` is
+    how many compared messages they published in the recording."""
+    seen = ours = 0  # publications looked at; the members' among them
+    since = clock.now()
+    while True:
+        new = network.published[seen:]
+        seen += len(new)
+        ours += sum(1 for s in new if sender_of(s.key) in members)
+        if new:
+            since = clock.now()
+        if clock.now() - since >= (QUIET if ours >= expected else STRAGGLE):
+            return
         await clock.sleep(QUIET / 10)
-        if len(network.published) != count:
-            count, since = len(network.published), clock.now()
 
 
 def report(script: AgentScript, verdict: Verdict, replayed: Replayed, seconds: float) -> list[str]:

@@ -7,9 +7,10 @@ and be equal field by field after msgpack decoding, except for measurements
 Today that is one: `SearchRound.seconds`, the wall time a search round took. Everything
 else, sim times and acks' `sent` counts included, must be equal.
 
-A replayed message whose recorded twin is missing from the file (a key published
-without blocking, whose message was dropped on the way to the recorder) is counted as
-unverified, not as a difference. Pure: no I/O.
+A replayed message whose recorded twin is missing from the file is counted as unverified,
+not as a difference: a key published without blocking whose message was dropped on the
+way to the recorder, or what the replay published after the member's last recorded ack
+(the run, and the recorder, stopped before the original got that far). Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -98,13 +99,14 @@ def compare(
     """Compare every key's messages; the first difference is the earliest in the run."""
     matched = unverified = 0
     found: list[Difference] = []
+    ends = _ends(recorded)
     for key in sorted(set(recorded) | set(replayed)):
         ours = {o.index: o for o in recorded.get(key, ())}
         theirs = {o.index: o for o in replayed.get(key, ())}
         last = max(ours, default=0)
         for index in sorted(set(ours) | set(theirs)):
             was, now = ours.get(index), theirs.get(index)
-            if was is None and index < last:
+            if was is None and (index < last or _after(now, ends)):
                 unverified += 1
             elif was is None:
                 found.append(_difference("extra", None, now))
@@ -119,9 +121,29 @@ def compare(
     return Verdict(matched, len(found), unverified, keys, first)
 
 
+def _ends(recorded: Mapping[str, Sequence[Output]]) -> dict[str, tuple[int, int, int]]:
+    """When each member's last recorded ack came: the file ends there for it."""
+    ends: dict[str, tuple[int, int, int]] = {}
+    for o in (o for outputs in recorded.values() for o in outputs if o.stage):
+        moment = _moment(o.epoch, o.stage, o.member)
+        ends[o.member] = max(ends.get(o.member, moment), moment)
+    return ends
+
+
+def _after(now: Output | None, ends: Mapping[str, tuple[int, int, int]]) -> bool:
+    """Whether a replayed message came after its member's last recorded ack (the run was
+    stopped, or the recorder with it, before the original got that far)."""
+    assert now is not None
+    end = ends.get(now.member)
+    return end is not None and _moment(now.epoch, now.stage, now.member) > end
+
+
 def _when(was: Output, now: Output) -> list[FieldDifference]:
-    """The same message sent in another epoch (or stage) is another decision."""
+    """The same message sent in another epoch (or stage) is another decision. A recorded
+    one after its member's last recorded ack has an epoch but no stage."""
     if (was.epoch, was.stage) == (now.epoch, now.stage):
+        return []
+    if not was.stage and was.epoch == now.epoch:
         return []
     return [FieldDifference(WHEN, (was.epoch, was.stage), (now.epoch, now.stage))]
 
