@@ -86,6 +86,21 @@ def test_a_recording_becomes_stand_ins_sends_and_waits_for_the_rebuilt_members()
     assert args == ["--agent", "robot1", "--agent-file", "a.toml"]
 
 
+def test_a_message_not_in_the_file_is_noted_and_a_restarted_sender_gets_a_new_stand_in() -> None:
+    status = keys.executor_status("robot1")
+    run = [*RUN]
+    for seq in (3, 1):  # 2 is not in the file; then the executor starts afresh
+        run.append(RecordedMessage(status, RUN[8].payload, 20 + seq, 0, seq, "", "msgpack"))
+    run.append(RecordedMessage(keys.SNAPSHOT, b"", 30, 0, 7, "", "msgpack"))  # nobody hears it
+    script = script_of(run, "robot1", "f.mcap")
+    assert script.notes == [
+        f"{status}: messages 2..2 are not in the file",
+        f"robot1/executor restarted (sequence of {status} went back to 1)",
+    ]
+    senders = [s.sender for s in script.steps if isinstance(s, Send) and s.key == status]
+    assert senders == ["robot1/executor", "robot1/executor", "robot1/executor#1"]
+
+
 def test_outputs_are_numbered_without_ready_acks_and_dated_by_the_next_ack() -> None:
     out = outputs_of(((m.key, m.seq, m.payload) for m in RUN), ["robot1/scheduler"])
     belief = out[keys.scheduler_beliefs("robot1")][0]
