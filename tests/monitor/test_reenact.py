@@ -11,7 +11,7 @@ import pytest
 from cbdi import keys
 from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.base import Message, encode
-from cbdi.wire.common import RunLaunched
+from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.planner import SearchRound
 from cbdi.wire.world import EpochAck, Tick, WorldInfo
 from cbdi_monitor import replay
@@ -92,8 +92,12 @@ def test_a_message_not_in_the_file_is_noted_and_a_restarted_sender_gets_a_new_st
     for seq in (3, 1):  # 2 is not in the file; then the executor starts afresh
         run.append(RecordedMessage(status, RUN[8].payload, 20 + seq, 0, seq, "", "msgpack"))
     run.append(RecordedMessage(keys.SNAPSHOT, b"", 30, 0, 7, "", "msgpack"))  # nobody hears it
+    end = RunFinished(reason="done", epoch=1, time=1.0, stalls={"robot1/executor": 2})
+    run.append(RecordedMessage(keys.EVENTS, encode(end), 31, 0, 1, "", "msgpack"))
     script = script_of(run, "robot1", "f.mcap")
     assert script.notes == [
+        "members were late beyond the ack timeout: robot1/executor (2 epochs); the replay may"
+        " differ",
         f"{status}: messages 2..2 are not in the file",
         f"robot1/executor restarted (sequence of {status} went back to 1)",
     ]

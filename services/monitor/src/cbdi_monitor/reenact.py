@@ -28,7 +28,7 @@ from cbdi import keys
 from cbdi.errors import WireError
 from cbdi.lockstep import default_sender
 from cbdi.wire.base import decode
-from cbdi.wire.common import RunLaunched
+from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import EpochAck, Tick, WorldInfo
 from cbdi_monitor.errors import NotReplayableError, UnknownAgentError
 from cbdi_monitor.reader import RecordedMessage
@@ -142,8 +142,24 @@ def script_of(records: Sequence[RecordedMessage], agent: str, path: str) -> Agen
         outputs=outputs,
         launched=_launched(records, members),
         last_epoch=max(done, default=-1),
-        notes=notes,
+        notes=[*_stalls(records), *notes],
     )
+
+
+def _stalls(records: Sequence[RecordedMessage]) -> list[str]:
+    """Say if the run had members late beyond the ack timeout: their inputs were released
+    by the clock there, which a replay does not repeat."""
+    key = keys.world_stream("events")
+    for m in records:
+        if m.key == key:
+            try:
+                stalls = decode(m.payload, RunFinished, key).stalls
+            except WireError:
+                return []
+            if stalls:
+                late = ", ".join(f"{s} ({n} epochs)" for s, n in sorted(stalls.items()))
+                return [f"members were late beyond the ack timeout: {late}; the replay may differ"]
+    return []
 
 
 def _world_info(records: Sequence[RecordedMessage], path: str) -> tuple[bytes, WorldInfo]:
