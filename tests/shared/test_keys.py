@@ -47,6 +47,7 @@ def test_bad_agent_names_are_refused(bad: str) -> None:
         ("cbdi/alive/robot1/executor", "robot1", "executor", "alive"),
         ("cbdi/alive/world", "", "world", "alive"),
         ("cbdi/trace/world/rpc/act/request", "", "trace", "world/rpc/act/request"),
+        ("cbdi/launcher/run", "", "launcher", "run"),
         ("other/thing", "", "", "other/thing"),
     ],
 )

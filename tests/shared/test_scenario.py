@@ -81,3 +81,15 @@ def test_bad_flags_exit_2_naming_the_flag(flags: list[str], capsys: pytest.Captu
     assert f"cbdi up: {flags[0]}: {flags[0][2:].replace('-', '_')}: expected" in (
         capsys.readouterr().err
     )
+
+
+def test_each_service_is_told_its_args_and_the_launcher_records_them() -> None:
+    # What `RunLaunched` carries: the end of each argv, enough to build the service again.
+    scenario = cli._scenario(cli._parser().parse_args(["paper-7x7", "--mode", "offline"]))
+    specs = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1")}
+    for spec in specs.values():
+        assert spec.args and spec.argv[-len(spec.args) :] == spec.args
+    planner = list(specs["robot1/planner"].args)
+    agent_file = planner[planner.index("--agent-file") + 1]
+    assert Path(agent_file).is_absolute() and Path(agent_file).name == "recycler.toml"
+    assert planner[planner.index("--planning") + 1] == "offline"

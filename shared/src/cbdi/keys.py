@@ -10,6 +10,7 @@ Layout (documented in docs/protocol.md):
 - liveliness tokens: `cbdi/alive/<service-id>` where the service id is `world`,
   `monitor`, or `<agent>/<component>`
 - request tracing for recorders: `cbdi/trace/<request key>`
+- the launcher's word for recorders: `cbdi/launcher/<stream>` (`run`: what it started)
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ __all__ = [
     "errors",
     "executor_arrested",
     "executor_status",
+    "launcher_stream",
     "member",
     "monitor_stream",
     "planner_forecasts",
@@ -216,6 +218,11 @@ def monitor_stream(stream: str) -> str:
     return f"{ROOT}/monitor/{stream}"
 
 
+def launcher_stream(stream: str) -> str:
+    """Return the key of a launcher stream (`run`: the services it started, and how)."""
+    return f"{ROOT}/launcher/{stream}"
+
+
 def service_id(component: str, agent: str | None = None) -> str:
     """Return the id of a service: `world`, `monitor`, or `<agent>/<component>`."""
     return f"{agent}/{component}" if agent else component
@@ -255,7 +262,7 @@ def describe(key: str) -> dict[str, str]:
         if len(rest) == 2:
             return {"agent": rest[0], "component": rest[1], "stream": "alive"}
         return {"agent": "", "component": "/".join(rest), "stream": "alive"}
-    if head in ("trace", "monitor"):
+    if head in ("trace", "monitor", "launcher"):
         return {"agent": "", "component": head, "stream": "/".join(rest)}
     return {"agent": head, "component": rest[0] if rest else "", "stream": "/".join(rest[1:])}
 

@@ -11,7 +11,9 @@ in arrival order. What a component does in epoch k so depends only on what was s
 it, never on when it arrived or how busy the machine is.
 
 The start barrier is epoch -1: a component announces `ready` (subscribed, waiting for
-epoch 0) until it sees epoch 0, and the world starts epoch 0 once every member did.
+epoch 0) until it sees epoch 0, and the world starts epoch 0 once every member did. A
+member's epoch -1 covers nothing: what it sends in epoch 0 (a peer's first claims, which
+race ours) is taken at the next gate, however early it comes.
 
 Resynchronisation, one rule for late, frozen and restarted members alike: a `Need` not
 met within the timeout is given up for this epoch and its sender named as late; what it

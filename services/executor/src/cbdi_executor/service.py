@@ -46,14 +46,14 @@ class ExecutorSettings(ServiceSettings):
 
     agent: str = field(default="robot1", metadata={"help": "the agent this executor serves"})
     ack_timeout: float = field(
-        default=30.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
+        default=120.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
     )
 
 
 class ExecutorService:
     """One agent's executor on the bus."""
 
-    def __init__(self, ctx: ServiceContext, agent: str, ack_timeout: float = 30.0) -> None:
+    def __init__(self, ctx: ServiceContext, agent: str, ack_timeout: float = 120.0) -> None:
         self.ctx, self.agent = ctx, agent
         self.dispatcher = Dispatcher(agent)
         self.clock = SimClock()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -9,15 +10,9 @@ from pathlib import Path
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from cbdi.errors import CbdiError
+from cbdi_monitor.errors import RecordingError
 
 __all__ = ["RecordedMessage", "RecordingError", "read_messages"]
-
-
-class RecordingError(CbdiError):
-    """Refuse a file that is not a readable MCAP recording."""
-
-    code = "bad_recording"
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,5 +48,5 @@ def read_messages(path: str | Path, keys: list[str] | None = None) -> Iterator[R
                     schema=channel.metadata.get("schema", ""),
                     encoding=channel.message_encoding,
                 )
-        except (McapError, EOFError, ValueError) as exc:
+        except (McapError, EOFError, ValueError, struct.error) as exc:  # struct: too short
             raise RecordingError(f"{p}: not a readable MCAP file ({exc})") from None

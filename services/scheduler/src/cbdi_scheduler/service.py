@@ -62,14 +62,14 @@ class SchedulerSettings(ServiceSettings):
     agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
     load_map: bool = field(default=True, metadata={"help": "ask the world for its map first"})
     ack_timeout: float = field(
-        default=30.0, metadata={"help": "lockstep: seconds to wait for the planner's epoch"}
+        default=120.0, metadata={"help": "lockstep: seconds to wait for the planner's epoch"}
     )
 
 
 class SchedulerService:
     """The mind of one agent on the bus."""
 
-    def __init__(self, ctx: ServiceContext, mind: Mind, ack_timeout: float = 30.0) -> None:
+    def __init__(self, ctx: ServiceContext, mind: Mind, ack_timeout: float = 120.0) -> None:
         self.ctx, self.mind, self.agent = ctx, mind, mind.agent
         self.search_ids = count(1)
         self.search_id = ""

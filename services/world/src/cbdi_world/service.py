@@ -63,7 +63,9 @@ class WorldSettings(ServiceSettings):
     wait_agents: float = field(
         default=30.0, metadata={"help": "seconds to wait for every member before epoch 0 (0: none)"}
     )
-    ack_timeout: float = field(default=30.0, metadata={"help": "lockstep: seconds per ack wait"})
+    ack_timeout: float = field(
+        default=120.0, metadata={"help": "lockstep: seconds to wait for a member's ack"}
+    )
     stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
     move_step: int = field(default=0, metadata={"help": "people step every N epochs (0: map's)"})
     det_area: int = field(default=-1, metadata={"help": "agents' detection depth (-1: map's)"})

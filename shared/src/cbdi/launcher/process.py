@@ -39,11 +39,23 @@ class RestartPolicy:
 
 @dataclass(frozen=True)
 class ProcessSpec:
-    """What to run: a service id (`world`, `robot1/executor`), its argv and environment."""
+    """What to run: a service id (`world`, `robot1/executor`), its argv and environment.
+
+    `args` are the arguments after the program (the end of `argv`): what the service was
+    told, as the launcher records it for a recording to say how to build it again.
+    """
 
     service: str
     argv: tuple[str, ...]
     env: dict[str, str] = field(default_factory=dict)
+    args: tuple[str, ...] = ()
+
+    @classmethod
+    def of(
+        cls, service: str, program: Sequence[str], args: Sequence[str], env: dict[str, str]
+    ) -> ProcessSpec:
+        """Return the spec running `program` (an argv prefix) with `args`."""
+        return cls(service, argv_of(program, args), env, tuple(args))
 
 
 LineSink = Callable[[str, str], None]

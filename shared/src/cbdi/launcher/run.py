@@ -1,9 +1,11 @@
 """`cbdi up`: run a scenario as separate OS processes and report how it went.
 
-Order: the router; the world; every agent's services. Each start waits until the
-service's liveliness token appears (so it is ready), then the run goes on until the world
-announces `RunFinished`, a service fails beyond its restart policy, the wall-clock limit
-passes, or the user presses Ctrl-C. Everything is stopped in reverse order.
+Order: the router; the monitor when recording; the world; every agent's services. Each
+start waits until the service's liveliness token appears (so it is ready), then the run
+goes on until the world announces `RunFinished`, a service fails beyond its restart
+policy, the wall-clock limit passes, or the user presses Ctrl-C. Everything is stopped in
+reverse order. Before the world starts, the launcher publishes what it starts and with
+which arguments (`RunLaunched`), so that a recording says how to build a service again.
 
 Meanwhile it listens to every planner (`cbdi.tally`): the summary's `planner` holds each
 BDI agent's plans, replans, forecast-triggered repairs and search rounds, and the total.
@@ -22,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cbdi import keys, tally
-from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, request
+from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish, request
 from cbdi.bus.base import Bus
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
@@ -35,7 +37,7 @@ from cbdi.launcher.process import (
 )
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.wire.base import Message
-from cbdi.wire.common import RunFinished
+from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
 
 __all__ = ["LaunchOptions", "RunSummary", "launch"]
@@ -118,18 +120,13 @@ def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessS
             world_args += ["--member", keys.member(agent.name, component)]
     monitor = []
     if record:
-        argv = argv_of(console_script("cbdi-monitor", "cbdi_monitor.cli"), "--output", record)
-        monitor = [ProcessSpec("monitor", argv, env)]
+        program = console_script("cbdi-monitor", "cbdi_monitor.cli")
+        monitor = [ProcessSpec.of("monitor", program, ("--output", record), env)]
+    router = console_script("cbdi", "cbdi.cli")
     specs = [
-        ProcessSpec(
-            "router",
-            argv_of(console_script("cbdi", "cbdi.cli"), "router", "--listen", endpoint),
-            {},
-        ),
+        ProcessSpec.of("router", router, ("router", "--listen", endpoint), {}),
         *monitor,
-        ProcessSpec(
-            "world", argv_of(console_script("cbdi-world", "cbdi_world.cli"), world_args), env
-        ),
+        ProcessSpec.of("world", console_script("cbdi-world", "cbdi_world.cli"), world_args, env),
     ]
     for agent in scenario.agents:
         for component in AGENT_KINDS[agent.kind]:
@@ -147,17 +144,16 @@ def _agent_spec(
             "scheduler": ("cbdi-scheduler", "cbdi_scheduler.cli"),
             "executor": ("cbdi-executor", "cbdi_executor.cli"),
         }[component]
-        argv = argv_of(console_script(*script), "--agent", name)
+        args = argv_of("--agent", name)
         if component != "executor":
-            argv = argv_of(argv, "--agent-file", str(agent.agent_file))
+            args = argv_of(args, "--agent-file", str(agent.agent_file))
         if component == "planner" and scenario.run.mode:
-            argv = argv_of(argv, "--planning", scenario.run.mode)
+            args = argv_of(args, "--planning", scenario.run.mode)
         if component == "planner" and scenario.run.planning_speed > 0:
-            argv = argv_of(argv, "--planning-speed", str(scenario.run.planning_speed))
-        return ProcessSpec(keys.service_id(component, name), argv, env)
+            args = argv_of(args, "--planning-speed", str(scenario.run.planning_speed))
+        return ProcessSpec.of(keys.service_id(component, name), console_script(*script), args, env)
     if kind == "scripted":
-        argv = argv_of(
-            console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli"),
+        args = argv_of(
             "--agent",
             name,
             "--map",
@@ -165,7 +161,8 @@ def _agent_spec(
             "--known-litter",
             str(scenario.run.known_litter),
         )
-        return ProcessSpec(keys.service_id(component, name), argv, env)
+        program = console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli")
+        return ProcessSpec.of(keys.service_id(component, name), program, args, env)
     raise CbdiError(f"agent kind {kind!r} has no services")
 
 
@@ -202,7 +199,11 @@ async def launch(
     bus: Bus | None = None
     try:
         async with asyncio.TaskGroup() as tg:
-            bus = await _start_all(procs, endpoint, opts, tg, summary, planners)
+            launched = RunLaunched(
+                scenario=scenario.name,
+                services={p.spec.service: list(p.spec.args) for p in procs},
+            )
+            bus = await _start_all(procs, endpoint, opts, tg, summary, planners, launched)
             await _await_end(bus, procs, scenario, opts, tg, summary, say)
             raise _Done
     except* _Done:
@@ -236,6 +237,7 @@ async def _start_all(
     tg: asyncio.TaskGroup,
     summary: RunSummary,
     planners: tally.PlannerTally,
+    launched: RunLaunched,
 ) -> Bus:
     summary.result = "starting"
     router, rest = procs[0], procs[1:]
@@ -258,7 +260,9 @@ async def _start_all(
     await _router_is_ours(router, endpoint, opts)
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1
-    for group in [*([p] for p in rest[:singles]), rest[singles:]]:
+    for i, group in enumerate([*([p] for p in rest[:singles]), rest[singles:]]):
+        if i == singles - 1:  # the monitor (if any) is up, the world not yet: say what runs
+            await publish(bus, keys.launcher_stream("run"), launched, block=True)
         late = sorted((opts.delays.get(p.spec.service, 0.0), i) for i, p in enumerate(group))
         waited = 0.0
         for delay, i in late:

@@ -33,10 +33,15 @@ class TogetherService:
 class Together:
     """Services sharing one event loop and one in-memory network until `stop()`."""
 
-    def __init__(self, services: Sequence[TogetherService], network: MemoryNetwork) -> None:
+    def __init__(
+        self,
+        services: Sequence[TogetherService],
+        network: MemoryNetwork,
+        log_level: str = "warning",
+    ) -> None:
         self.network = network
         self.contexts = [
-            ServiceContext(s.service, network.bus(), Log(s.service, level="warning"), s.settings)
+            ServiceContext(s.service, network.bus(), Log(s.service, level=log_level), s.settings)
             for s in services
         ]
         self.mains = [s.main for s in services]

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from cbdi.wire.base import Message
 
-__all__ = ["ErrorReply", "ErrorReport", "Liveliness", "RunFinished", "ServiceHealth"]
+__all__ = [
+    "ErrorReply",
+    "ErrorReport",
+    "Liveliness",
+    "RunFinished",
+    "RunLaunched",
+    "ServiceHealth",
+]
 
 
 class ErrorReply(Message, frozen=True, tag="cbdi.ErrorReply/1"):
@@ -38,6 +45,17 @@ class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     # The world's request trace: how many requests, and the digest of all of them.
     requests: int = 0
     trace_digest: str = ""
+
+
+class RunLaunched(Message, frozen=True, tag="cbdi.RunLaunched/1"):
+    """Say how the launcher started a run's services, before the world starts.
+
+    Each service id's command-line arguments (after the program), so that a recording
+    tells how to build any of its services again (`cbdi replay --check`).
+    """
+
+    scenario: str
+    services: dict[str, list[str]]
 
 
 class Liveliness(Message, frozen=True, tag="cbdi.Liveliness/1"):

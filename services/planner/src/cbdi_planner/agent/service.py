@@ -75,7 +75,7 @@ class PlannerSettings(ServiceSettings):
         metadata={"help": "virtual time: expansions per simulated second (0: agent file's)"},
     )
     ack_timeout: float = field(
-        default=30.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
+        default=120.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
     )
 
 
@@ -188,7 +188,7 @@ class PlannerService(_Epochs):
         backend: str,
         grid: float,
         planning_speed: float = 0.0,
-        ack_timeout: float = 30.0,
+        ack_timeout: float = 120.0,
     ) -> None:
         self.ctx, self.agent, self.domain, self.raw = ctx, agent, domain, raw
         self.backend, self.grid = backend, grid
@@ -341,7 +341,7 @@ class OnlinePlannerService(_Epochs):
         ctx: ServiceContext,
         core: ContinualPlanner,
         planning_speed: float = 0.0,
-        ack_timeout: float = 30.0,
+        ack_timeout: float = 120.0,
     ) -> None:
         self.ctx, self.core, self.agent = ctx, core, core.agent
         self.has_beliefs = False
