@@ -61,7 +61,7 @@ def test_the_replayed_planner_and_scheduler_decide_as_recorded(recording: Path) 
     result = check(recording)
     assert result.returncode == 0, result.stdout + result.stderr[-3000:]
     found = re.search(r"same: (\d+) messages of robot1's planner and scheduler", result.stdout)
-    assert found and int(found.group(1)) > 500, result.stdout
+    assert found and int(found.group(1)) > 200, result.stdout
     assert "as the launcher recorded it" in result.stdout  # the agent file it was given
 
 

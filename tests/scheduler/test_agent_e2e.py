@@ -96,7 +96,8 @@ async def test_agent_pursues_its_desire_to_the_end(
                 seen.append((event.desire, event.event))
             _, cancel = await anext(searches)
             assert cancel.kind == "cancel" and cancel.request_id == search.request_id
-        assert seen[:2] == [("recycle", "added"), ("recycle", "activated")]
+        recycle = [s for s in seen if s[0] == "recycle"]  # make_way comes and goes too
+        assert recycle[:2] == [("recycle", "added"), ("recycle", "activated")]
         stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats)
         assert stats.litter_recycled == 1 and stats.agents[0].moves == 6
     finally:
@@ -108,5 +109,6 @@ async def test_agent_pursues_its_desire_to_the_end(
     from cbdi_monitor.view import convert
 
     robot = inspect_messages(read_messages(recording)).agents["robot1"]
-    assert (robot.plans, robot.goals_achieved, robot.moves) == (1, 1, 6)
+    # Two goals: recycling, then making way from the bin (its search gets no plan here).
+    assert (robot.plans, robot.goals_achieved, robot.moves) == (1, 2, 6)
     assert convert(recording, tmp_path / "agent.rrd") > 0
