@@ -104,17 +104,3 @@ def test_a_passed_deadline_drops_the_desire() -> None:
     dropped = [e for e in late.events if e.event == "dropped"]
     assert len(dropped) == 1 and "deadline" in dropped[0].reason
     assert "drop" in [c.kind for c in late.commands]
-
-
-def test_a_deadline_does_not_drop_an_intention_whose_plan_is_executing() -> None:
-    """The deadline is for planning: a robot carrying out its plan is not stopped midway
-    (the paper's 64 s recycling deadline used to drop and re-take the desire)."""
-    mind = Mind(load_agent(AGENT, "robot1"))
-    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
-    step = PlanStep(step_id="p-1", action="move", args=[], start=1.0, duration=1.0)
-    plan = PartialPlan(agent="robot1", plan_id="p", baseline="", steps=[step], complete=False)
-    assert "execute" in [c.kind for c in mind.on_plan(plan).commands]
-    late = mind.on_percepts(percepts(65, [("pla1", (1, 1))]))
-    assert not [e for e in late.events if e.event == "dropped"]
-    assert "drop" not in [c.kind for c in late.commands]
-    assert mind.intentions.current is not None and mind.intentions.current.plan_id == "p"

@@ -71,21 +71,12 @@ class Drop:
 
 
 def drops(
-    desires: Mapping[str, Desire],
-    beliefs: BeliefSet,
-    now: float,
-    active: str | None,
-    executing: bool = False,
+    desires: Mapping[str, Desire], beliefs: BeliefSet, now: float, active: str | None
 ) -> list[Drop]:
-    """Return the desires to drop: deadline passed, or the active one's context failed.
-
-    The deadline is for planning (the paper; ROS2-BDI stretches it for execution with
-    `rtc_deadline`): the active desire whose plan is `executing` is not dropped by it, or
-    a robot meeting its goal would drop it midway and start over.
-    """
+    """Return the desires to drop: deadline passed, or the active one's context failed."""
     out = []
     for name, d in sorted(desires.items()):
-        if now > d.deadline and not (name == active and executing):
+        if now > d.deadline:
             out.append(Drop(name, f"deadline {d.deadline:g} passed at {now:g}"))
         elif name == active and d.context and not holds(d.context, beliefs):
             out.append(Drop(name, "context no longer holds"))

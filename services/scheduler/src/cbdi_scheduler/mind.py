@@ -103,10 +103,8 @@ class Mind:
             out.commands += self.intentions.achieved()
             out.events.append(self.event(current.desire, "achieved"))
             self.desires.pop(current.desire.name, None)
-        cur = self.intentions.current
-        active = cur.desire.name if cur else None
-        executing = cur is not None and bool(cur.plan_id)
-        for drop in drops(self.desires, self.beliefs, self.now, active, executing):
+        active = self.intentions.current.desire.name if self.intentions.current else None
+        for drop in drops(self.desires, self.beliefs, self.now, active):
             desire = self.desires.pop(drop.desire)
             self._dropped(desire, drop.reason, out)
             if drop.desire == active:
