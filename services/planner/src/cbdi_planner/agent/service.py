@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from abc import ABC, abstractmethod
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from itertools import count
@@ -79,7 +80,7 @@ class PlannerSettings(ServiceSettings):
     )
 
 
-class _Epochs:
+class _Epochs(ABC):
     """The lockstep side shared by both modes: inputs, the gate, the epoch's budget."""
 
     ctx: ServiceContext
@@ -159,11 +160,13 @@ class _Epochs:
         except Exception as exc:
             self.ctx.crashed(key, exc)
 
+    @abstractmethod
     async def handle_input(self, key: str, msg: Message) -> None:
-        raise NotImplementedError
+        """Handle one input of this mode (online or offline)."""
 
+    @abstractmethod
     async def plan_epoch(self) -> None:
-        raise NotImplementedError
+        """Plan for one epoch of virtual time, within its expansion budget."""
 
 
 @dataclass
