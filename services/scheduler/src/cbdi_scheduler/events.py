@@ -15,6 +15,8 @@ from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
 
 __all__ = [
+    "UNKNOWN_DISTANCE",
+    "Distances",
     "cell_name",
     "distance",
     "map_beliefs",
@@ -107,24 +109,74 @@ def map_beliefs(
 UNKNOWN_DISTANCE = 1e9  # finite: it travels in JSON exports too
 
 
+class Distances:
+    """Path lengths over the believed `near` graph, searched once per source cell.
+
+    The `near` facts come from the map and do not change during a run: the graph is
+    built once, and each breadth-first search from a cell is kept (up to `keep` cells),
+    so a claim costs a dictionary lookup. If the `near` facts do change, the graph and
+    the searches are rebuilt.
+    """
+
+    def __init__(self, keep: int = 64) -> None:
+        self.keep = keep
+        self._near_count = -1
+        self._graph: dict[str, list[str]] = {}
+        self._from: dict[str, dict[str, int]] = {}
+        self._facts: frozenset[tuple[str, ...]] | None = None
+        self._at: dict[str, str] = {}  # agent or item -> its believed cell
+
+    def _refresh(self, beliefs: BeliefSet) -> None:
+        if beliefs.facts is self._facts:
+            return
+        self._facts = beliefs.facts
+        near, self._at = [], {}
+        for f in beliefs.facts:
+            if f[0] == "near":
+                near.append(f)
+            elif f[0] in ("in", "litter_pose") and len(f) == 3:
+                self._at[f[1]] = f[2]
+        if len(near) == self._near_count:
+            return
+        graph: dict[str, list[str]] = {}
+        for f in sorted(near):
+            graph.setdefault(f[1], []).append(f[2])
+        self._graph, self._from, self._near_count = graph, {}, len(near)
+
+    def lengths(self, beliefs: BeliefSet, here: str) -> dict[str, int]:
+        """Return the path length from `here` to every cell it reaches."""
+        self._refresh(beliefs)
+        known = self._from.get(here)
+        if known is not None:
+            return known
+        lengths = {here: 0}
+        frontier = [here]
+        while frontier:
+            nxt = []
+            for c in frontier:
+                for n in self._graph.get(c, ()):
+                    if n not in lengths:
+                        lengths[n] = lengths[c] + 1
+                        nxt.append(n)
+            frontier = nxt
+        if len(self._from) >= self.keep:
+            self._from.pop(next(iter(self._from)))
+        self._from[here] = lengths
+        return lengths
+
+    def __call__(self, beliefs: BeliefSet, agent: str, item: str) -> float:
+        """Return the believed path length (over `near`) from `agent` to litter `item`:
+        0 if it holds it, UNKNOWN_DISTANCE if either place or a path is unknown."""
+        if ("holding", agent, item) in beliefs.facts:
+            return 0.0
+        self._refresh(beliefs)
+        here, there = self._at.get(agent), self._at.get(item)
+        if here is None or there is None:
+            return UNKNOWN_DISTANCE
+        steps = self.lengths(beliefs, here).get(there)
+        return UNKNOWN_DISTANCE if steps is None else float(steps)
+
+
 def distance(beliefs: BeliefSet, agent: str, item: str) -> float:
-    """Return the believed path length (over `near`) from `agent` to litter `item`: 0 if
-    it holds it, UNKNOWN_DISTANCE if either place or a path is unknown."""
-    if ("holding", agent, item) in beliefs.facts:
-        return 0.0
-    here = next((f[2] for f in beliefs.facts if f[:2] == ("in", agent)), None)
-    there = next((f[2] for f in beliefs.facts if f[:2] == ("litter_pose", item)), None)
-    if here is None or there is None:
-        return UNKNOWN_DISTANCE
-    near: dict[str, list[str]] = {}
-    for f in beliefs.facts:
-        if f[0] == "near":
-            near.setdefault(f[1], []).append(f[2])
-    seen, frontier, steps = {here}, [here], 0
-    while frontier:
-        if there in frontier:
-            return float(steps)
-        steps += 1
-        frontier = [n for c in frontier for n in near.get(c, ()) if n not in seen]
-        seen.update(frontier)
-    return UNKNOWN_DISTANCE
+    """Return the believed path length from `agent` to litter `item` (one search)."""
+    return Distances(keep=1)(beliefs, agent, item)

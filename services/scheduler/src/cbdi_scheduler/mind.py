@@ -16,7 +16,7 @@ from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
-from cbdi_scheduler.events import distance, revise_from_outcome, revise_from_percepts
+from cbdi_scheduler.events import Distances, revise_from_outcome, revise_from_percepts
 from cbdi_scheduler.intentions import Command, IntentionScheduler
 from cbdi_scheduler.rules import fire_rules
 
@@ -46,6 +46,7 @@ class Mind:
         self.epoch = -1
         self.refire = False  # fire the rules next cycle even if nothing changed
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
+        self.distance = Distances()
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -186,7 +187,7 @@ class Mind:
             out.claims += claims.claim(
                 (g.atom for g in mine),
                 self.epoch,
-                lambda item: distance(self.beliefs, self.agent, item),
+                lambda item: self.distance(self.beliefs, self.agent, item),
                 holding=self._holding(),
             )
             if len(mine) == len(desire.goal):

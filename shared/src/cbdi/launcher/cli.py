@@ -153,7 +153,17 @@ def _scenario(args: argparse.Namespace) -> Scenario:
         field, reason = problems[0]
         raise ConfigError(f"--{field.replace('_', '-')}", field, reason)
     scenario = replace(scenario, run=run)
-    return scenario.with_agents(args.agents) if args.agents else scenario
+    scenario = scenario.with_agents(args.agents) if args.agents else scenario
+    if not any(a.kind == "bdi" for a in scenario.agents):
+        for flag, value in (("--mode", args.mode), ("--planning-speed", args.planning_speed)):
+            if value is not None:
+                raise ConfigError(
+                    flag,
+                    scenario.name,
+                    "the scenario has no BDI agent (only scripted ones), so nothing plans; "
+                    "pick a BDI scenario (the -bdi ones and paper-7x7)",
+                )
+    return scenario
 
 
 def _delays(entries: Sequence[str], scenario: Scenario) -> dict[str, float]:
