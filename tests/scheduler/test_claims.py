@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import msgspec
+
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
 from cbdi.wire.world import LitterView, Percepts
@@ -139,6 +141,21 @@ def test_a_robot_holding_an_item_owns_it_whatever_else_was_claimed() -> None:
     assert [(c.item, c.cost, c.epoch) for c in again] == [("p1", -1.0, 30)]
     assert a.owner("p1") == "robot2"
     assert a.claim([("recycled", "p1")], 32, lambda item: 9.0, holding={"p1"}) == []
+
+
+def test_a_robot_that_picked_up_an_item_another_owned_takes_it_into_its_goal() -> None:
+    """Seen in a warehouse run: robot1 picked up an item claimed by robot2 (its plan's
+    committed part had the pickup), and the holding rule's boost was stripped every
+    epoch as another's: the item stayed in hand until a deadline let go of it."""
+    r1 = Mind(load_agent(AGENT, "robot1"))
+    r1.on_claim(Claim(agent="robot2", group="recyclers", item="p1", epoch=0, cost=1.0))
+    first = r1.on_percepts(seen("robot1", 0, ("p2", (1, 1))))
+    assert goal(r1) == [("recycled", "p2")] and [c.item for c in first.claims] == ["p2"]
+    holding = msgspec.structs.replace(seen("robot1", 1, ("p2", (1, 1))), holding=["p1"])
+    out = r1.on_percepts(holding)
+    assert ("recycled", "p1") in goal(r1)
+    assert [(c.item, c.cost) for c in out.claims] == [("p1", -1.0)]
+    assert r1.claims is not None and r1.claims.owner("p1") == "robot1"
 
 
 def test_distances_on_the_30x30_campus_are_shortest_paths_and_fast() -> None:

@@ -104,3 +104,34 @@ def test_a_passed_deadline_drops_the_desire() -> None:
     dropped = [e for e in late.events if e.event == "dropped"]
     assert len(dropped) == 1 and "deadline" in dropped[0].reason
     assert "drop" in [c.kind for c in late.commands]
+
+
+def _executing(mind: Mind) -> None:
+    step = PlanStep(step_id="p-1", action="move", args=[], start=1.0, duration=1.0)
+    plan = PartialPlan(agent="robot1", plan_id="p", baseline="", steps=[step], complete=False)
+    assert "execute" in [c.kind for c in mind.on_plan(plan).commands]
+
+
+def test_a_running_intention_keeps_its_desire_past_the_deadline_up_to_rtc_deadline() -> None:
+    """The deadline is for planning: a robot carrying out its plan is not stopped midway
+    (the paper's 64 s recycling deadline used to drop and re-take the desire), but only
+    up to `rtc_deadline` (2) times the span: 64 + 64 s."""
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    _executing(mind)
+    kept = mind.on_percepts(percepts(100, [("pla1", (1, 1))]))
+    assert not [e for e in kept.events if e.event == "dropped"]
+    assert mind.intentions.current is not None and mind.intentions.current.plan_id == "p"
+    late = mind.on_percepts(percepts(129, [("pla1", (1, 1))]))
+    dropped = [e for e in late.events if e.event == "dropped"]
+    assert len(dropped) == 1 and "deadline 128 passed" in dropped[0].reason
+
+
+def test_a_boost_with_a_new_literal_gives_the_desire_its_span_again() -> None:
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    assert mind.desires["recycle"].deadline == 64.0
+    mind.on_percepts(percepts(30, [("pla1", (1, 1)), ("pla2", (1, 1))]))
+    assert mind.desires["recycle"].deadline == 94.0  # pla2 was seen at 30
+    mind.on_percepts(percepts(40, [("pla1", (1, 1)), ("pla2", (1, 1))]))
+    assert mind.desires["recycle"].deadline == 94.0  # nothing new: no refresh

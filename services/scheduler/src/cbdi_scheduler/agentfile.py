@@ -7,6 +7,7 @@ the field (`rules[0].then[1].boost.goal[0]`) and what is wrong.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,7 @@ class AgentFile:
     preemption: str = "clean_preempt"
     plan_retries: int = 3
     exec_retries: int = 3
+    rtc_deadline: float = 2.0  # the executing desire's deadline: this many times its span
     claim: tuple[str, ...] = ()  # goal predicates whose first argument the group shares out
     beliefs: tuple[Belief, ...] = ()
     desires: tuple[Desire, ...] = ()
@@ -77,6 +79,7 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         preemption=preemption,
         plan_retries=r.opt(bdi, "plan_retries", int, 3, "scheduler"),
         exec_retries=r.opt(bdi, "exec_retries", int, 3, "scheduler"),
+        rtc_deadline=_rtc_deadline(r.opt(bdi, "rtc_deadline", float, 2.0, "scheduler"), source),
         claim=tuple(
             r.check(p, str, f"scheduler.claim[{i}]")
             for i, p in enumerate(r.opt(bdi, "claim", list, [], "scheduler"))
@@ -90,6 +93,12 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         rules=tuple(r.rule(x, f"rules[{i}]") for i, x in enumerate(r.opt(data, "rules", list, []))),
         planning=raw.planning,
     )
+
+
+def _rtc_deadline(value: float, source: str) -> float:
+    if not (math.isfinite(value) and value >= 1.0):
+        raise AgentFileError(source, "scheduler.rtc_deadline", f"expected a number >= 1, got {value}")
+    return float(value)
 
 
 class _Reader:

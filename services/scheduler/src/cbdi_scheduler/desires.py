@@ -3,10 +3,16 @@
 A desire is a goal (predicate literals to make true) with a priority, a deadline (an
 absolute simulated time once the desire is held), a precondition that must hold to
 activate it and a context that must keep holding while it is pursued.
+
+The deadline is for planning, as in the paper: a desire not taken up by then is dropped.
+The desire whose plan is executing gets `rtc_deadline` times its span (ROS2-BDI's
+name), so a robot meeting its goal is not stopped midway and started over; and a BOOST
+that adds a literal gives the desire the rule's span again from then for it.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 
@@ -34,6 +40,13 @@ class Desire:
     deadline: float = NO_DEADLINE
     precondition: Condition = ()
     context: Condition = ()
+    span: float = NO_DEADLINE  # the relative deadline it was taken up with
+
+    def stretched(self, rtc_deadline: float) -> float:
+        """Return the deadline of this desire while its plan executes."""
+        if not math.isfinite(self.span):
+            return self.deadline
+        return self.deadline + (rtc_deadline - 1.0) * self.span
 
     def bound(self, binding: Binding) -> Desire:
         """Return this desire with `binding` substituted in its name and goal."""
@@ -45,16 +58,20 @@ class Desire:
 
     def due(self, now: float) -> Desire:
         """Return this desire held from `now`: a relative deadline becomes absolute."""
-        return replace(self, deadline=now + self.deadline)
+        return replace(self, deadline=now + self.deadline, span=self.deadline)
 
 
-def boosted(desire: Desire, extra: Iterable[Belief]) -> Desire:
-    """Extend a desire's goal with more literals (the paper's BOOST: the union)."""
+def boosted(desire: Desire, extra: Iterable[Belief], deadline: float | None = None) -> Desire:
+    """Extend a desire's goal with more literals (the paper's BOOST: the union); if any
+    is new and `deadline` is later than the desire's, the desire gets it."""
     goal = list(desire.goal)
     for literal in extra:
         if literal not in goal:
             goal.append(literal)
-    return replace(desire, goal=tuple(goal))
+    if len(goal) == len(desire.goal):
+        return desire
+    later = deadline is not None and deadline > desire.deadline
+    return replace(desire, goal=tuple(goal), deadline=deadline if later else desire.deadline)
 
 
 def achieved(desire: Desire, beliefs: BeliefSet) -> bool:
@@ -71,13 +88,22 @@ class Drop:
 
 
 def drops(
-    desires: Mapping[str, Desire], beliefs: BeliefSet, now: float, active: str | None
+    desires: Mapping[str, Desire],
+    beliefs: BeliefSet,
+    now: float,
+    active: str | None,
+    executing: bool = False,
+    rtc_deadline: float = 1.0,
 ) -> list[Drop]:
-    """Return the desires to drop: deadline passed, or the active one's context failed."""
+    """Return the desires to drop: deadline passed, or the active one's context failed.
+
+    The `active` desire whose plan is `executing` has `rtc_deadline` times its span.
+    """
     out = []
     for name, d in sorted(desires.items()):
-        if now > d.deadline:
-            out.append(Drop(name, f"deadline {d.deadline:g} passed at {now:g}"))
+        due = d.stretched(rtc_deadline) if name == active and executing else d.deadline
+        if now > due:
+            out.append(Drop(name, f"deadline {due:g} passed at {now:g}"))
         elif name == active and d.context and not holds(d.context, beliefs):
             out.append(Drop(name, "context no longer holds"))
     return out

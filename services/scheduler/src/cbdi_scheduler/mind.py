@@ -90,11 +90,14 @@ class Mind:
         if claims is None:
             return desires
         out = {}
+        holding = self._holding()
         for name, d in desires.items():
             held = self.desires.get(name)
             old = set(held.goal) if held is not None else set()
-            goal = tuple(g for g in d.goal if g in old or claims.foreign(g.atom) is None)
-            if goal:
+            goal = tuple(g for g in d.goal if g in old or self._ours(g.atom, holding))
+            if held is not None and set(goal) == old:
+                out[name] = held  # what a boost brought was all others': nothing new
+            elif goal:
                 out[name] = replace(d, goal=goal) if goal != d.goal else d
         return out
 
@@ -104,8 +107,11 @@ class Mind:
             out.commands += self.intentions.achieved()
             out.events.append(self.event(current.desire, "achieved"))
             self.desires.pop(current.desire.name, None)
-        active = self.intentions.current.desire.name if self.intentions.current else None
-        for drop in drops(self.desires, self.beliefs, self.now, active):
+        cur = self.intentions.current
+        active = cur.desire.name if cur else None
+        executing = cur is not None and bool(cur.plan_id)
+        rtc = self.spec.rtc_deadline
+        for drop in drops(self.desires, self.beliefs, self.now, active, executing, rtc):
             desire = self.desires.pop(drop.desire)
             self._dropped(desire, drop.reason, out)
             if drop.desire == active:
@@ -163,6 +169,12 @@ class Mind:
                 g.atom for g in desire.goal if self.claims.claimable(g.atom) not in held
             )
 
+    def _ours(self, atom: tuple[str, ...], holding: set[str]) -> bool:
+        """Return whether `atom`'s object is free or ours: an item in hand is always ours
+        (we claim it as its holder), even if another agent's claim won it before."""
+        assert self.claims is not None
+        return self.claims.foreign(atom) is None or self.claims.claimable(atom) in holding
+
     def _holding(self) -> set[str]:
         return {f[2] for f in self.beliefs.facts if f[:2] == ("holding", self.agent)}
 
@@ -182,13 +194,14 @@ class Mind:
         claims = self.claims
         if claims is None:
             return
+        holding = self._holding()
         for name, desire in list(self.desires.items()):
-            mine = [g for g in desire.goal if claims.foreign(g.atom) is None]
+            mine = [g for g in desire.goal if self._ours(g.atom, holding)]
             out.claims += claims.claim(
                 (g.atom for g in mine),
                 self.epoch,
                 lambda item: self.distance(self.beliefs, self.agent, item),
-                holding=self._holding(),
+                holding=holding,
             )
             if len(mine) == len(desire.goal):
                 continue

@@ -95,7 +95,7 @@ def _apply(effect: RuleEffect, binding: Binding, out: RulesOutcome, now: float) 
         if held is None:
             out.desires[d.name] = d.due(now)
         else:
-            grown = boosted(held, d.goal)
+            grown = boosted(held, d.goal, now + d.deadline)
             if grown != held:
                 out.desires[d.name] = grown
                 out.boosted.append(d.name)
