@@ -240,3 +240,35 @@ def test_map_beliefs_describe_the_grid() -> None:
     assert not beliefs.holds(fact("near", "c_0_0", "c_1_0"))  # not into the wall
     assert beliefs.holds(fact("bin_pose", "bin_0_0", "c_0_0"))
     assert not beliefs.holds(fact("free", "c_0_0")) and beliefs.holds(fact("free", "c_2_0"))
+
+
+def test_an_obstacle_out_of_sight_is_remembered_for_a_while() -> None:
+    """Forgotten at once, a blocked short way out of sight looked free again, and a robot
+    turned back and forth between it and a detour (seen with three robots on 7x7)."""
+    from cbdi_scheduler.events import OBSTACLE_MEMORY, seen_blocked
+
+    cells = [instance(f"c_{x}_0", "cell") for x in range(6)]
+    before = BeliefSet.of([*cells, fact("free", "c_1_0")])
+    seen = Percepts(
+        agent="robot",
+        epoch=1,
+        time=1.0,
+        position=(0, 0),
+        depth=1,
+        free=[],
+        blocked=[(1, 0)],
+        holding=[],
+        litter=[],
+    )
+    memory = seen_blocked({}, seen)
+    after = revise_from_percepts(before, seen, blocked=memory)
+    moved = replace(seen, epoch=2, time=2.0, position=(3, 0), free=[(2, 0), (4, 0)], blocked=[])
+    memory = seen_blocked(memory, moved)
+    later = revise_from_percepts(after, moved, blocked=memory)
+    assert not later.holds(fact("free", "c_1_0"))  # out of sight, still believed blocked
+    gone = replace(moved, epoch=10, time=1.0 + OBSTACLE_MEMORY)
+    memory = seen_blocked(memory, gone)
+    assert memory == {}
+    assert revise_from_percepts(later, gone, blocked=memory).holds(fact("free", "c_1_0"))
+    back = replace(seen, epoch=3, time=3.0, free=[(1, 0)], blocked=[])
+    assert seen_blocked(seen_blocked({}, seen), back) == {}  # seen free again: forgotten

@@ -61,6 +61,7 @@ class ExecutorService:
         self.beliefs_epoch = -1
         self.outcome_epoch = -1
         self.acked = -1
+        self.holding = False  # lockstep: an epoch's inputs are being taken in, dispatch after
         self.ack_timeout = ack_timeout
         self.lockstep = Lockstep(
             self.input_keys(),
@@ -100,9 +101,16 @@ class ExecutorService:
             released = await self.lockstep.gate.wait(needs, self.ack_timeout)
             if released.late:
                 self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
-            for _, msg in released.messages:
-                if not isinstance(msg, EpochAck | Percepts):
-                    await self.handle(msg)
+            # Take in the whole epoch (outcomes, beliefs, plans, arrests) before anything
+            # is dispatched: an outcome handled first would start the next step of a
+            # plan the scheduler arrests in the same epoch.
+            self.holding = True
+            try:
+                for _, msg in released.messages:
+                    if not isinstance(msg, EpochAck | Percepts):
+                        await self.handle(msg)
+            finally:
+                self.holding = False
             await self.step()
             self.acked = epoch
             await send_ack(self.ctx.bus, self.agent, "executor", epoch)
@@ -139,7 +147,7 @@ class ExecutorService:
 
     async def step(self) -> None:
         """Dispatch what is due now (again after a refusal frees the next step)."""
-        while self.current():
+        while self.current() and not self.holding:
             effects = self.dispatcher.tick(self.clock.now(), self.beliefs)
             await self.send(effects)
             if not any(st.status == "refused" for st in effects.statuses):

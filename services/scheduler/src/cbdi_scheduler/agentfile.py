@@ -97,7 +97,9 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
 
 def _rtc_deadline(value: float, source: str) -> float:
     if not (math.isfinite(value) and value >= 1.0):
-        raise AgentFileError(source, "scheduler.rtc_deadline", f"expected a number >= 1, got {value}")
+        raise AgentFileError(
+            source, "scheduler.rtc_deadline", f"expected a number >= 1, got {value}"
+        )
     return float(value)
 
 

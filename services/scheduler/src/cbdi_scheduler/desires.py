@@ -70,8 +70,8 @@ def boosted(desire: Desire, extra: Iterable[Belief], deadline: float | None = No
             goal.append(literal)
     if len(goal) == len(desire.goal):
         return desire
-    later = deadline is not None and deadline > desire.deadline
-    return replace(desire, goal=tuple(goal), deadline=deadline if later else desire.deadline)
+    due = desire.deadline if deadline is None else max(deadline, desire.deadline)
+    return replace(desire, goal=tuple(goal), deadline=due)
 
 
 def achieved(desire: Desire, beliefs: BeliefSet) -> bool:

@@ -4,17 +4,22 @@ Within the sensed square the percepts are the truth: `free` cells are believed f
 every other cell of the square not free; litter seen is believed where it is seen, and a
 believed item no longer seen in the square is forgotten there. Outside the square the
 agent assumes free space: people and robots move, so an obstacle once seen is forgotten
-when out of sight (a cell believed blocked for good would wall the robot in), and only
-bins block for good. The agent's own cell,
+`OBSTACLE_MEMORY` seconds after it was last seen (a cell believed blocked for good would
+wall the robot in; one forgotten the moment it is out of sight makes a robot turn back
+and forth between a short way it cannot see is blocked and a detour), and only bins
+block for good. The agent's own cell,
 what it holds and its load (`loaded_amount`) come with every percept.
 """
 
 from __future__ import annotations
 
+from collections.abc import Collection
+
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
 
 __all__ = [
+    "OBSTACLE_MEMORY",
     "UNKNOWN_DISTANCE",
     "Distances",
     "cell_name",
@@ -22,6 +27,7 @@ __all__ = [
     "map_beliefs",
     "revise_from_outcome",
     "revise_from_percepts",
+    "seen_blocked",
 ]
 
 
@@ -40,16 +46,38 @@ def _stale(atom: tuple[str, ...], square: set[str], me: str) -> bool:
     return name in ("in", "holding") and args[0] == me
 
 
+OBSTACLE_MEMORY = 8.0  # simulated seconds an obstacle out of sight is still believed
+
+
+def seen_blocked(
+    memory: dict[str, float], p: Percepts, keep: float = OBSTACLE_MEMORY
+) -> dict[str, float]:
+    """Return when each cell was last seen blocked, with this epoch's percepts, leaving
+    out cells seen free now and those not seen blocked for `keep` seconds."""
+    out = {c: t for c, t in memory.items() if p.time - t < keep}
+    for c in p.free:
+        out.pop(cell_name(c), None)
+    out.pop(cell_name(p.position), None)
+    for c in p.blocked:
+        out[cell_name(c)] = p.time
+    return out
+
+
 def revise_from_percepts(
-    beliefs: BeliefSet, p: Percepts, litter_type: str = "plastic"
+    beliefs: BeliefSet,
+    p: Percepts,
+    litter_type: str = "plastic",
+    blocked: Collection[str] = (),
 ) -> BeliefSet:
-    """Return `beliefs` revised with one epoch's percepts of agent `p.agent`."""
+    """Return `beliefs` revised with one epoch's percepts of agent `p.agent`; cells in
+    `blocked` (seen blocked lately, `seen_blocked`) stay not free out of sight."""
     square = {cell_name(c) for c in (*p.free, *p.blocked, p.position)}
     me = p.agent
     stale = [fact(*atom) for atom in beliefs.facts if _stale(atom, square, me)]
     fresh = [fact("free", cell_name(c)) for c in p.free]
     bins = {f[2] for f in beliefs.facts if f[0] == "bin_pose"}
     unseen = {n for n, t in beliefs.instances.items() if t == "cell"} - square - bins
+    unseen -= set(blocked)
     fresh += [fact("free", c) for c in sorted(unseen) if ("free", c) not in beliefs.facts]
     fresh.append(fact("in", me, cell_name(p.position)))
     for item in p.litter:

@@ -16,7 +16,12 @@ from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
-from cbdi_scheduler.events import Distances, revise_from_outcome, revise_from_percepts
+from cbdi_scheduler.events import (
+    Distances,
+    revise_from_outcome,
+    revise_from_percepts,
+    seen_blocked,
+)
 from cbdi_scheduler.intentions import Command, IntentionScheduler
 from cbdi_scheduler.rules import fire_rules
 
@@ -47,6 +52,7 @@ class Mind:
         self.refire = False  # fire the rules next cycle even if nothing changed
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
         self.distance = Distances()
+        self.blocked: dict[str, float] = {}  # cell -> when last seen blocked
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -62,7 +68,8 @@ class Mind:
         """Run one BDI cycle on this epoch's percepts."""
         self.now, self.epoch = p.time, p.epoch
         before = self.beliefs
-        self.beliefs = revise_from_percepts(self.beliefs, p)
+        self.blocked = seen_blocked(self.blocked, p)
+        self.beliefs = revise_from_percepts(self.beliefs, p, blocked=self.blocked)
         out = Reaction(beliefs_changed=self.beliefs != before)
         if out.beliefs_changed or self.epoch == 0 or self.refire:
             # After a drop the rules fire again even on unchanged beliefs: what made the

@@ -48,7 +48,8 @@ class SearchStatus(Message, frozen=True, tag="cbdi.planner.SearchStatus/1"):
 class SearchRound(Message, frozen=True, tag="cbdi.planner.SearchRound/1"):
     """Statistics of one round of the continual search (Alg. 1) for `plan_id`.
 
-    `kind`: `goal`, `best` or `exhausted`; `mode`: `G` (greedy) or `NG` (complete);
+    `kind`: `goal`, `best` or `exhausted`; `mode`: `G` (greedy), `NG` (complete)
+    or `improve` (the anytime improving search);
     `purpose`: `new`, `repair`, `revise` or `improve`; `best_h` the heuristic value of
     the best state; `plan_actions` how many actions its plan adds.
     """

@@ -46,6 +46,7 @@ from cbdi_planner.continual import (
     commit,
     forecast,
 )
+from cbdi_planner.continual.improver import Improver
 from cbdi_planner.errors import PlannerError
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl import parse_problem
@@ -86,7 +87,7 @@ class Line:
 class Search:
     """A search thread and the line it fills (or, improving, may replace)."""
 
-    thread: SearchThread
+    thread: SearchThread | Improver
     line: Line
     purpose: str
     request_id: str
@@ -112,11 +113,23 @@ class ContinualPlanner:
         self.now = 0.0
         self.request: SearchRequest | None = None
         self.line: Line | None = None
-        self.search: Search | None = None
+        self._search: Search | None = None
         self.last_forecast: tuple[str, str, str] = ("", "", "")
         self.repair_trigger = ""
         self.ids = count(1)
         self.published: set[str] = set()  # every plan id sent, for the statuses' sake
+
+    @property
+    def search(self) -> Search | None:
+        """The search in progress (None: none)."""
+        return self._search
+
+    @search.setter
+    def search(self, new: Search | None) -> None:
+        old = self._search
+        if old is not None and old is not new and isinstance(old.thread, Improver):
+            old.thread.close()  # its worker thread stops
+        self._search = new
 
     # -- bounds and problems ---------------------------------------------------------------
     def bound(self) -> RoundBound:
@@ -248,7 +261,10 @@ class ContinualPlanner:
             and not line.improved
             and self.search is None
             and fc.commitment.state is not None
+            and any(st in ("running", "succeeded") for st in line.statuses.values())
         ):
+            # Only a line that executes: a line still waiting for the one it replaces
+            # may itself be replaced before its committed part runs.
             line.improved = True
             rest = line.makespan_after(fc.commitment.count)
             out += self._from_committed("improve", task, improve_on=rest)
@@ -269,9 +285,11 @@ class ContinualPlanner:
         ends = [a.time + (a.duration or 0.0) for a in line.steps[: done.count]]
         origin = self.next_grid(max([self.now, *ends]) - 1e-9)
         new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
-        thread = self._thread(
-            task, state, prefix=done.count, improving=purpose == "improve", improve_on=improve_on
-        )
+        thread: SearchThread | Improver
+        if purpose == "improve":
+            thread = Improver(task, state, prefix=done.count, improve_on=improve_on)
+        else:
+            thread = self._thread(task, state, prefix=done.count)
         self.search = Search(thread, new, purpose, req.request_id, repairs=line)
         self.log("search_from_committed", purpose=purpose, plan=new.plan_id, after=after)
         return []
@@ -297,6 +315,7 @@ class ContinualPlanner:
         if search is not self.search:
             return []
         out: list[Message] = []
+        better: ImprovedPlan | None = None
         if search.repairs is not None:
             old = search.repairs
             started = sum(1 for s in old.statuses.values() if s in ("running", "succeeded"))
@@ -314,18 +333,22 @@ class ContinualPlanner:
                 if event.complete:
                     out.append(self._status(search.request_id, "done"))
             elif isinstance(event, ImprovedPlan):
-                improved = Plan(event.plan.actions)
-                self.log(
-                    "improved",
-                    plan=search.line.plan_id,
-                    makespan=improved.makespan,
-                    than=event.than,
-                )
-                out.append(self._publish(search, improved, True))
+                better = event  # a round may find several: the last is the best
             elif isinstance(event, ModeChanged):
                 self.log("fall_back", plan=search.line.plan_id, mode=event.mode)
             elif isinstance(event, SearchFailed):
                 out += self._failed(search, event.reason)
+        if better is not None and self.search is search:
+            # Lines 23-24: the best plan of the round replaces the executing one after
+            # the committed part. The search ends here: what it would find next starts
+            # from a committed part execution is about to leave behind, so the next
+            # improvement starts afresh from the new plan's committed part.
+            improved = Plan(better.plan.actions)
+            self.log(
+                "improved", plan=search.line.plan_id, makespan=improved.makespan, than=better.than
+            )
+            out.append(self._publish(search, improved, True))
+            self.search = None
         if search.thread.finished and self.search is search:
             self.search = None
         return out
