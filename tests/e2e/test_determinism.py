@@ -42,6 +42,7 @@ def test_the_paper_run_repeats_exactly_under_load_and_a_seed_changes_it() -> Non
     assert other["trace_digest"] != first["trace_digest"]
 
 
+@pytest.mark.timeout(600)  # two 3-robot runs whose planners search each epoch, loaded
 def test_three_robots_repeat_exactly_under_load() -> None:
     with cpu_load():
         runs = [run("warehouse-15x15-bdi", "--until", "60") for _ in range(2)]

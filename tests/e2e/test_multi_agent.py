@@ -18,6 +18,7 @@ from tests_support import cbdi_up, cpu_load
 pytestmark = pytest.mark.e2e
 
 
+@pytest.mark.timeout(600)  # a whole 3-robot warehouse run beside CPU burners
 def test_three_bdi_robots_recycle_all_litter_with_no_item_picked_twice(tmp_path: Path) -> None:
     rec = tmp_path / "three.mcap"
     late = [f"--delay=robot{i}/scheduler={i}" for i in (1, 2, 3)]

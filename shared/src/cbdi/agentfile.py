@@ -41,6 +41,9 @@ class PlanningSettings:
     min_commit_steps: int = 1
     forecast_horizon: int = 0
     empty_rounds: int = 10
+    # Expansions one improving search may take (Alg. 2 lines 23-24) before it gives up
+    # on the plan it tries to beat (0: no bound).
+    improve_expansions: int = 3000
     backend: str = "cbdi"
     timeout: float = 30.0
     # Virtual time (lockstep): node expansions per simulated second of planning. The
@@ -107,6 +110,8 @@ def _planning(table: Any, source: str) -> PlanningSettings:
         raise AgentFileError(
             source, "planning.planning_speed", "expected a finite number of expansions above 0"
         )
+    if settings.improve_expansions < 0:
+        raise AgentFileError(source, "planning.improve_expansions", "expected 0 or more")
     if settings.mode not in MODES:
         raise AgentFileError(source, "planning.mode", f"expected one of {', '.join(MODES)}")
     return settings

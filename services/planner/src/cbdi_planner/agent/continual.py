@@ -287,7 +287,13 @@ class ContinualPlanner:
         new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
         thread: SearchThread | Improver
         if purpose == "improve":
-            thread = Improver(task, state, prefix=done.count, improve_on=improve_on)
+            thread = Improver(
+                task,
+                state,
+                prefix=done.count,
+                improve_on=improve_on,
+                budget=self.settings.improve_expansions,
+            )
         else:
             thread = self._thread(task, state, prefix=done.count)
         self.search = Search(thread, new, purpose, req.request_id, repairs=line)

@@ -81,13 +81,15 @@ class Improver:
     """Search for plans shorter than `improve_on` from a committed state, in rounds.
 
     The same interface as `SearchThread` for the continual planner: `step` runs one
-    round, `finished` says the search is over, `prefix` counts committed actions.
+    round, `finished` says the search is over (its space done, or `budget` expansions
+    spent), `prefix` counts committed actions.
     """
 
     task: Task
     state: State
     prefix: int = 0
     improve_on: float = math.inf
+    budget: int = 0  # expansions in all at most (0: none)
     epsilon: float = 0.001
     now: Callable[[], float] = time.monotonic
     rounds: int = 0
@@ -156,6 +158,11 @@ class Improver:
         started = self.now()
         before = self.stats.expanded
         grant = bound.expansions if bound.expansions else 200
+        if self.budget:
+            grant = min(grant, self.budget - self.stats.expanded)
+            if grant <= 0:
+                self.close()
+                return []
         cond = self.clock.cond
         with cond:
             if not self.started:
