@@ -225,11 +225,13 @@ async def test_the_planner_refuses_nonsense_requests_and_serves_the_next_one() -
     async with alone(shell) as (bus, ctx):
         statuses = messages(bus, keys.planner_status("robot1"), SearchStatus, LogSink())
         valid = SearchRequest(agent="robot1", request_id="s1", kind="start", problem=CORRIDOR)
+        deep = "(define (problem p) (:domain recycling) (:goal " + "(and " * 500 + ")" * 502
         nonsense = [
             raw(valid, kind="move"),
             raw(valid, goal=[[]]),
             raw(valid, goal=[[""]]),
             raw(valid, request_id=""),
+            encode(SearchRequest(agent="robot1", request_id="s2", kind="start", problem=deep)),
             encode(SearchRequest(agent="robot1", request_id="s3", kind="start", goal=[["x"]])),
         ]
         key = keys.planner_requests("robot1")
@@ -246,6 +248,7 @@ async def test_the_planner_refuses_nonsense_requests_and_serves_the_next_one() -
                 _, answer = await anext(statuses)
         assert answer.status == "searching"
         assert bad_inputs(ctx) == len(GARBAGE) + len(nonsense) + 1
+        assert ctx.counters["handler_crash"] == 0  # the deep problem is a parse error
 
 
 async def test_the_world_answers_nonsense_requests_with_errors_and_serves_the_next_one() -> None:
