@@ -31,6 +31,7 @@ from cbdi.runtime.together import Together, TogetherService
 from cbdi.wire import decode, encode
 from cbdi.wire.agent import ActionStatus, BeliefsUpdate, Check, PartialPlan, PlanStep
 from cbdi.wire.common import ErrorReply, ErrorReport
+from cbdi.wire.fields import MAX_ITEMS
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import (
     ActionReply,
@@ -183,7 +184,7 @@ async def test_the_scheduler_rejects_an_empty_belief_name_and_revises_on_the_nex
         valid = percepts(holding=["p1"])
         nonsense = [
             raw(valid, holding=[""]),
-            raw(valid, holding=["p1"] * 100_001),
+            raw(valid, holding=["p1"] * (MAX_ITEMS + 1)),
             raw(valid, time=math.nan),
             raw(valid, litter=[{"schema": "cbdi.world.LitterView/1", "name": "", "cell": [1, 1]}]),
             raw(valid, position=[1]),

@@ -14,6 +14,7 @@ import msgspec
 
 from cbdi.wire.base import Message
 from cbdi.wire.fields import (
+    MAX_ITEMS,
     AgentName,
     Atom,
     Epoch,
@@ -125,7 +126,7 @@ class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
 
     agent: AgentName
     time: Finite
-    instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=100_000)]
+    instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)]
     facts: Many[Atom]
     fluents: Many[tuple[Atom, Finite]]
     epoch: Epoch = -1  # the world epoch whose percepts these beliefs include

@@ -33,7 +33,7 @@ __all__ = [
 
 T = TypeVar("T")
 
-MAX_ITEMS = 100_000  # elements of one list or map (a 300x300 map's cells)
+MAX_ITEMS = 1_000_000  # elements of one list or map (the facts of a 300x300 map)
 MAX_TEXT = 65_536  # characters of a free-text field (reasons, messages)
 MAX_PROBLEM = 4_000_000  # characters of a PDDL problem sent to a planner
 _BIG = sys.float_info.max
