@@ -34,11 +34,14 @@ __all__ = [
     "ArrestReport",
     "BeliefsUpdate",
     "Check",
+    "CheckOp",
     "Claim",
     "DesireEvent",
     "EarlyArrest",
     "PartialPlan",
     "PlanStep",
+    "RequestOp",
+    "StepStatus",
 ]
 
 StepStatus = Literal["waiting", "running", "succeeded", "failed", "refused", "cancelled"]

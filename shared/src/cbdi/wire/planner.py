@@ -14,6 +14,7 @@ __all__ = [
     "SEARCH_KINDS",
     "SEARCH_STATUSES",
     "ForecastReport",
+    "SearchKind",
     "SearchRequest",
     "SearchRound",
     "SearchStatus",

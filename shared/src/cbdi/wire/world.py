@@ -34,6 +34,7 @@ __all__ = [
     "Cell",
     "EpochAck",
     "LitterView",
+    "OutcomeStatus",
     "Percepts",
     "PersonView",
     "StatsRequest",
