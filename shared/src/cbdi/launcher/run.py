@@ -238,7 +238,7 @@ async def _start_all(
     summary: RunSummary,
     planners: tally.PlannerTally,
     launched: RunLaunched,
-) -> tuple[Bus, AsyncIterator[tuple[str, RunFinished]]]:
+) -> tuple[Bus, asyncio.Queue[RunFinished]]:
     summary.result = "starting"
     router, rest = procs[0], procs[1:]
     await router.start()
@@ -247,8 +247,11 @@ async def _start_all(
     live = _Liveliness()
     tg.create_task(live.follow(bus))
     # The world's last word, heard from before it starts: a short run (`--until 1`) may
-    # end before every agent service is seen alive.
-    ends = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
+    # end before every agent service is seen alive. A task reads it from now on (a
+    # subscription nobody iterates is never closed, and keeps the interpreter alive).
+    ends: asyncio.Queue[RunFinished] = asyncio.Queue()
+    events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
+    tg.create_task(_forward(events, ends))
     # Subscribed before any agent starts, so the tally misses none of their messages.
     tg.create_task(_count(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
     act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
@@ -277,6 +280,13 @@ async def _start_all(
         await _wait_alive(live, group, opts)
     summary.result = "running"
     return bus, ends
+
+
+async def _forward(
+    stream: AsyncIterator[tuple[str, RunFinished]], to: asyncio.Queue[RunFinished]
+) -> None:
+    async for _, msg in stream:
+        to.put_nowait(msg)
 
 
 async def _router_is_ours(router: ManagedProcess, endpoint: str, opts: LaunchOptions) -> None:
@@ -339,7 +349,7 @@ async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: Laun
 
 async def _await_end(
     bus: Bus,
-    ends: AsyncIterator[tuple[str, RunFinished]],
+    ends: asyncio.Queue[RunFinished],
     procs: list[ManagedProcess],
     scenario: Scenario,
     opts: LaunchOptions,
@@ -353,7 +363,8 @@ async def _await_end(
             ended.set_result(reason)
 
     async def finished() -> None:
-        async for _, msg in ends:
+        while True:
+            msg = await ends.get()
             summary.epochs, summary.sim_time = msg.epoch, msg.time
             summary.stalls = dict(sorted(msg.stalls.items()))
             summary.requests, summary.trace_digest = msg.requests, msg.trace_digest
