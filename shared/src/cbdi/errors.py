@@ -44,12 +44,14 @@ class RejectedInputError(CbdiError):
     """Report a valid message whose handling failed with a domain error (and was dropped).
 
     `schema` is the message's, `sender` who sent it (its `agent` field, if any), `key`
-    where it arrived, `reason` the domain error.
+    where it arrived, `reason` the domain error, `code` the domain error's own code
+    (`bad_request`, `unknown_plan`, ...) or `rejected`.
     """
 
-    code = "rejected"
-
-    def __init__(self, schema: str, reason: str, key: str, sender: str = "") -> None:
+    def __init__(
+        self, schema: str, reason: str, key: str, sender: str = "", code: str = "rejected"
+    ) -> None:
+        self.code = code
         self.schema = schema
         self.reason = reason
         self.key = key

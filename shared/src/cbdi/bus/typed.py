@@ -69,9 +69,9 @@ def dropping(sink: ErrorSink, key: str, message: Message) -> Iterator[None]:
         yield
     except (CbdiError, ValueError) as exc:
         reason = str(exc) or type(exc).__name__
-        sink.bad_input(
-            key, RejectedInputError(schema_of(type(message)), reason, key, sender_of(message))
-        )
+        code = str(getattr(exc, "code", "rejected"))
+        schema, sender = schema_of(type(message)), sender_of(message)
+        sink.bad_input(key, RejectedInputError(schema, reason, key, sender, code))
     except Exception as exc:
         sink.crashed(key, exc)
 
