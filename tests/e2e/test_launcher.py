@@ -7,6 +7,7 @@ import os
 import re
 import signal
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -116,6 +117,20 @@ def test_time_limited_run_and_seconds_until() -> None:
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
     assert summary["result"] == "time_limit" and summary["epochs"] == 5
+
+
+def test_a_run_shorter_than_the_start_ends_when_the_world_does() -> None:
+    # Three BDI agents, one epoch, one service late beyond the world's 30 s start
+    # barrier (as on a loaded machine): the world runs without it and finishes before
+    # the launcher has seen every service alive. The launcher still hears the world's
+    # last word and ends (it used to wait for its 120 s limit and exit 1).
+    started = time.monotonic()
+    late = ("--delay", "robot3/executor=35")
+    result = up("paper-7x7", "--agents", "3", "--until", "1", *late, "--json", "--quiet")
+    assert result.returncode == 0, result.stderr[-2000:]
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "time_limit" and summary["epochs"] == 1
+    assert time.monotonic() - started < 100
 
 
 def test_unknown_scenario_and_bad_options_exit_2() -> None:

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import random
 from pathlib import Path
 
 import pytest
 
 from cbdi.wire import encode
 from cbdi.wire.world import ActionOutcome, ActionRequest, Tick
+from cbdi_monitor import export, inspect, view
 from cbdi_monitor.inspect import inspect_messages
 from cbdi_monitor.reader import RecordingError, read_messages
-from cbdi_monitor.recorder import McapRecorder, Rotation
+from cbdi_monitor.recorder import GARBAGE_PER_KEY, GARBAGE_TOTAL, McapRecorder, Rotation
 from cbdi_monitor.schemas import json_schema, peek_schema, wire_classes
 
 S = 1_000_000_000
@@ -33,7 +35,7 @@ def test_round_trip_keeps_keys_times_sequences_and_schemas(tmp_path: Path) -> No
     assert got[0].publish_ns == S  # no publish time from the sender: the log time stands in
     assert got[1].publish_ns == S and got[1].log_ns == 2 * S
     assert {m.schema for m in got} == {"cbdi.world.Tick/1", ""}
-    assert got[-1].payload == b"\xc1 not msgpack"  # recorded as is, never dropped
+    assert got[-1].payload == b"\xc1 not msgpack"  # recorded as is (the first ones)
     assert rec.counts == {"cbdi/world/clock": 5, "cbdi/odd": 1}
     rec.write("cbdi/late", tick(9), log_ns=S * 10)
     assert rec.late == 1  # after close: counted, not written
@@ -98,3 +100,76 @@ def test_inspect_counts_moves_failures_and_first_action(tmp_path: Path) -> None:
     assert agent.first_action_time == 3.0
     assert agent.actions == {"move:succeeded": 1, "move:failed": 1}
     assert report.undecodable == 1 and report.messages == 6 and report.duration_s == 4.0
+
+
+def test_garbage_is_recorded_in_part_and_the_rest_counted(tmp_path: Path) -> None:
+    rec = McapRecorder(tmp_path / "r.mcap")
+    for i in range(1000):  # a flood of garbage queries, mirrored on one trace key
+        rec.write("cbdi/trace/world/rpc/act/request", b"\xc1" * 100, log_ns=S + i)
+    for i in range(3000):  # and on ever new keys
+        rec.write(f"cbdi/junk{i}/x/y", b"not msgpack", log_ns=2 * S + i)
+    assert rec.write("cbdi/world/clock", tick(1), log_ns=3 * S)  # real traffic: always
+    rec.close()
+    assert rec.garbage["cbdi/trace/world/rpc/act/request"] == GARBAGE_PER_KEY
+    assert sum(rec.garbage.values()) == GARBAGE_TOTAL
+    assert sum(rec.dropped.values()) == 4000 - GARBAGE_TOTAL
+    got = list(read_messages(tmp_path / "r.mcap"))
+    assert len(got) == GARBAGE_TOTAL + 1 and got[-1].key == "cbdi/world/clock"
+    # the trace key, the junk keys kept, the clock: no channel for a dropped key
+    assert len(rec.counts) == 1 + (GARBAGE_TOTAL - GARBAGE_PER_KEY) + 1
+
+
+def test_export_keeps_the_channel_metadata(tmp_path: Path) -> None:
+    rec = McapRecorder(tmp_path / "r.mcap")
+    status = encode(
+        ActionOutcome(
+            agent="robot1",
+            request_id="1",
+            action="move",
+            status="failed",
+            reason="x",
+            epoch=1,
+            time=1.0,
+        )
+    )
+    rec.write("cbdi/world/outcomes/robot1", status, log_ns=S)
+    rec.write("cbdi/world/clock", tick(0), log_ns=S)
+    rec.close()
+    assert export.main([str(tmp_path / "r.mcap"), "--json", str(tmp_path / "j.mcap")]) == 0
+    original = {m.key: dict(m.metadata) for m in read_messages(tmp_path / "r.mcap")}
+    exported = {m.key: dict(m.metadata) for m in read_messages(tmp_path / "j.mcap")}
+    assert exported == original
+    outcome = exported["cbdi/world/outcomes/robot1"]
+    assert {"agent", "component", "stream", "schema"} <= set(outcome)
+    assert (outcome["agent"], outcome["component"]) == ("robot1", "world")
+
+
+def test_damaged_recordings_give_exit_2_and_a_message(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = McapRecorder(tmp_path / "good.mcap")
+    for i in range(300):
+        rec.write("cbdi/world/clock", tick(i), log_ns=S + i, seq=i + 1)
+    rec.close()
+    data = (tmp_path / "good.mcap").read_bytes()
+    bad, out = tmp_path / "bad.mcap", tmp_path / "out"
+    rng = random.Random("mcap")
+    variants = [b"", b"\x89MCAP0\r\n", b"certainly not mcap", data[:34], data[:150]]
+    for _ in range(30):
+        i = rng.randrange(len(data))
+        variants.append(data[:i] + bytes([rng.randrange(256)]) + data[i + 1 :])
+    refused = 0
+    for variant in variants:
+        bad.write_bytes(variant)
+        codes = {
+            inspect.main([str(bad)]),
+            export.main([str(bad), "--json", str(out)]),
+            view.main([str(bad), "--rrd", str(tmp_path / "out.rrd")]),
+        }
+        assert codes <= {0, 2}, variant
+        if 2 in codes:
+            refused += 1
+            assert "not a readable MCAP file" in capsys.readouterr().err
+            assert not out.exists()  # a failed export leaves no half copy
+        out.unlink(missing_ok=True)
+    assert refused >= 6

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import re
 
 import msgpack
 import pytest
@@ -104,3 +105,87 @@ def test_beliefs_round_trip_through_the_wire() -> None:
     )
     update = decode(encode(to_wire(beliefs, "r", 3.0, epoch=3)), BeliefsUpdate)
     assert from_wire(update) == beliefs and update.epoch == 3
+
+
+def _tagged(cls: type, **fields: object) -> bytes:
+    return msgpack.packb({"schema": schema_of(cls), **fields})  # type: ignore[arg-type,no-any-return]
+
+
+PERCEPTS = {
+    "agent": "robot1",
+    "epoch": 0,
+    "time": 0.0,
+    "position": [1, 1],
+    "depth": 1,
+    "free": [],
+    "blocked": [],
+    "litter": [],
+    "holding": [],
+}
+
+
+@pytest.mark.parametrize(
+    ("cls", "fields", "where"),
+    [
+        ("Check", {"atom": ["free", "c_1_1"], "op": "move"}, "`$.op`"),
+        ("Check", {"atom": []}, "`$.atom`"),
+        ("Check", {"atom": ["free", ""]}, "`$.atom[1]`"),
+        ("Check", {"atom": ["loaded_amount", "r"], "op": "LT", "value": float("nan")}, "finite"),
+        ("Percepts", {**PERCEPTS, "holding": [""]}, "`$.holding[0]`"),
+        ("Percepts", {**PERCEPTS, "time": float("inf")}, "`$.time`"),
+        ("Percepts", {**PERCEPTS, "agent": "robot 1"}, "`$.agent`"),
+        (
+            "Tick",
+            {"epoch": 1, "time": 1.0, "epoch_duration": 0.0, "speed": 1.0, "lockstep": False},
+            "`$.epoch_duration`",
+        ),
+        ("EpochAck", {"agent": "robot1/x", "epoch": 0}, "`$.agent`"),
+        (
+            "AgentRequest",
+            {"from_agent": "r2", "group": "g", "op": "add_desire", "priority": 8},
+            "`$.priority`",
+        ),
+        ("SearchRequest", {"agent": "r", "request_id": "s", "kind": "move"}, "`$.kind`"),
+        (
+            "PlanStep",
+            {"step_id": "s", "action": "move", "args": [], "start": 1e400, "duration": 1},
+            "finite",
+        ),
+    ],
+)
+def test_schema_valid_nonsense_is_rejected_naming_the_field(
+    cls: str, fields: dict[str, object], where: str
+) -> None:
+    import cbdi.wire.agent
+    import cbdi.wire.planner
+    import cbdi.wire.world
+
+    modules = (cbdi.wire.agent, cbdi.wire.planner, cbdi.wire.world)
+    message = next(getattr(m, cls) for m in modules if hasattr(m, cls))
+    with pytest.raises(WireError, match=re.escape(where)):
+        decode(_tagged(message, **fields), message)
+
+
+names = st.text(max_size=4)
+atoms = st.lists(names, max_size=3)
+
+
+@given(
+    facts=st.lists(atoms, max_size=4),
+    fluents=st.lists(st.tuples(atoms, st.floats()), max_size=3),
+    instances=st.dictionaries(names, names, max_size=3),
+)
+def test_beliefs_that_decode_always_make_a_belief_set(
+    facts: list[list[str]], fluents: list[tuple[list[str], float]], instances: dict[str, str]
+) -> None:
+    from cbdi.beliefs import from_wire
+    from cbdi.wire.agent import BeliefsUpdate
+
+    payload = _tagged(
+        BeliefsUpdate, agent="robot1", time=0.0, instances=instances, facts=facts, fluents=fluents
+    )
+    try:
+        update = decode(payload, BeliefsUpdate)
+    except WireError:
+        return
+    from_wire(update)  # never a ValueError: the wire types rule out what it refuses

@@ -8,6 +8,7 @@ planner needs the domain and the `[planning]` settings. Both read the file here,
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -15,7 +16,14 @@ from typing import Any
 
 from cbdi.errors import CbdiError
 
-__all__ = ["MODES", "AgentFileError", "PlanningSettings", "RawAgentFile", "read_agent_file"]
+__all__ = [
+    "MODES",
+    "AgentFileError",
+    "PlanningSettings",
+    "RawAgentFile",
+    "domain_signature",
+    "read_agent_file",
+]
 
 MODES = ("online", "offline")
 
@@ -68,6 +76,8 @@ def read_agent_file(path: str | Path, agent: str) -> RawAgentFile:
         text = p.read_text(encoding="utf-8").replace("{self}", agent)
     except OSError as exc:
         raise AgentFileError(str(p), "file", exc.strerror or str(exc)) from None
+    except UnicodeDecodeError as exc:
+        raise AgentFileError(str(p), "file", f"not UTF-8 text (byte {exc.start})") from None
     return parse_agent_text(text, str(p), p.parent)
 
 
@@ -84,6 +94,19 @@ def parse_agent_text(text: str, source: str, base: Path) -> RawAgentFile:
     if not path.is_file():
         raise AgentFileError(source, "domain", f"no such file {path}")
     return RawAgentFile(data, source, path, _planning(data.get("planning", {}), source))
+
+
+# The lower bound of each numeric planning setting (NaN and infinities never pass).
+_LIMITS = (
+    ("round_interval", 0.0, "expected a finite number of seconds >= 0"),
+    ("expansions_per_round", 0, "expected an integer >= 0 (0: no bound)"),
+    ("plan_size_limit", 0, "expected an integer >= 0 (0: no limit)"),
+    ("min_commit_steps", 0, "expected an integer >= 0"),
+    ("forecast_horizon", 0, "expected an integer >= 0 (0: the whole plan)"),
+    ("empty_rounds", 0, "expected an integer >= 0"),
+    ("improve_expansions", 0, "expected an integer >= 0 (0: no bound)"),
+    ("timeout", 0.0, "expected a finite number of seconds above 0"),
+)
 
 
 def _planning(table: Any, source: str) -> PlanningSettings:
@@ -110,8 +133,44 @@ def _planning(table: Any, source: str) -> PlanningSettings:
         raise AgentFileError(
             source, "planning.planning_speed", "expected a finite number of expansions above 0"
         )
-    if settings.improve_expansions < 0:
-        raise AgentFileError(source, "planning.improve_expansions", "expected 0 or more")
+    for key, low, reason in _LIMITS:
+        value = getattr(settings, key)
+        if not (math.isfinite(value) and value >= low) or (key == "timeout" and value == 0):
+            raise AgentFileError(source, f"planning.{key}", f"{reason}, got {value!r}")
     if settings.mode not in MODES:
         raise AgentFileError(source, "planning.mode", f"expected one of {', '.join(MODES)}")
     return settings
+
+
+_TOKEN = re.compile(r";[^\n]*|\(|\)|[^\s();]+")
+
+
+def domain_signature(text: str) -> dict[str, int]:
+    """Return the predicates and functions a PDDL domain declares, with their arities.
+
+    A scan of the `(:predicates ...)` and `(:functions ...)` sections only: enough for
+    an agent file's check that its beliefs, rules and goals name what the domain has,
+    without the common library depending on the planner's parser.
+    """
+    tokens = [t.lower() for t in _TOKEN.findall(text) if not t.startswith(";")]
+    found: dict[str, int] = {}
+    i = 0
+    while i < len(tokens) - 1:
+        if tokens[i] == "(" and tokens[i + 1] in (":predicates", ":functions"):
+            i = _declarations(tokens, i + 2, found)
+        else:
+            i += 1
+    return found
+
+
+def _declarations(tokens: list[str], i: int, found: dict[str, int]) -> int:
+    """Read `(name ?a - t ?b)...` up to the section's `)`; return the index after it."""
+    while i < len(tokens) and tokens[i] != ")":
+        if tokens[i] == "(" and i + 1 < len(tokens):
+            j = i + 2
+            while j < len(tokens) and tokens[j] not in ("(", ")"):
+                j += 1
+            found[tokens[i + 1]] = sum(t.startswith("?") for t in tokens[i + 2 : j])
+            i = j
+        i += 1
+    return i + 1

@@ -10,6 +10,7 @@ __all__ = [
     "BusClosedError",
     "CbdiError",
     "ConfigError",
+    "RejectedInputError",
     "RequestFailedError",
     "RequestTimeoutError",
     "WireError",
@@ -27,12 +28,34 @@ class WireError(CbdiError):
     of the wrong type, a missing field, another schema), `key` where it arrived, if known.
     """
 
-    def __init__(self, schema: str, reason: str, key: str | None = None) -> None:
+    def __init__(self, schema: str, reason: str, key: str | None = None, sender: str = "") -> None:
         self.schema = schema
         self.reason = reason
         self.key = key
+        self.sender = sender
         where = f" on {key}" if key else ""
-        super().__init__(f"bad {schema} message{where}: {reason}")
+        source = f" from {sender}" if sender else ""
+        super().__init__(f"bad {schema} message{source}{where}: {reason}")
+
+
+class RejectedInputError(CbdiError):
+    """Report a valid message whose handling failed with a domain error (and was dropped).
+
+    `schema` is the message's, `sender` who sent it (its `agent` field, if any), `key`
+    where it arrived, `reason` the domain error, `code` the domain error's own code
+    (`bad_request`, `unknown_plan`, ...) or `rejected`.
+    """
+
+    def __init__(
+        self, schema: str, reason: str, key: str, sender: str = "", code: str = "rejected"
+    ) -> None:
+        self.code = code
+        self.schema = schema
+        self.reason = reason
+        self.key = key
+        self.sender = sender
+        source = f" from {sender}" if sender else ""
+        super().__init__(f"rejected {schema} message{source} on {key}: {reason}")
 
 
 class ConfigError(CbdiError):

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
+from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep, StepStatus
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest
 from cbdi_executor.binding import UnboundActionError, to_request
 from cbdi_executor.checks import describe, first_failing
@@ -29,7 +29,7 @@ class StepState:
 
     plan_id: str
     step: PlanStep
-    status: str = "waiting"
+    status: StepStatus = "waiting"
     reason: str = ""
     request_id: str = ""
     ends_at: float = float("inf")  # when the world said it ends (once accepted)
@@ -204,7 +204,9 @@ class Dispatcher:
     def _by_request(self, request_id: str) -> StepState | None:
         return next((s for s in self.steps if s.request_id == request_id), None)
 
-    def _set(self, state: StepState, status: str, reason: str, now: float, out: Effects) -> None:
+    def _set(
+        self, state: StepState, status: StepStatus, reason: str, now: float, out: Effects
+    ) -> None:
         state.status, state.reason = status, reason
         self._report(state, now, out)
 

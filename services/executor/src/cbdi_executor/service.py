@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, from_wire
 from cbdi.bus import publish, request, sequenced_inputs
-from cbdi.bus.typed import Stamped
+from cbdi.bus.typed import Stamped, dropping
 from cbdi.clock import SimClock
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
@@ -84,9 +84,10 @@ class ExecutorService:
     async def run(self, stream: AsyncIterator[Stamped]) -> None:
         """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""
         async for item in stream:
-            for _, m in await self.lockstep.put(item):
+            for key, m in await self.lockstep.put(item):
                 if not isinstance(m, EpochAck | Percepts):
-                    await self.handle(m)
+                    with dropping(self.ctx, key, m):
+                        await self.handle(m)
                     await self.maybe_ack()
 
     async def epochs(self, first: int) -> None:
@@ -106,9 +107,10 @@ class ExecutorService:
             # plan the scheduler arrests in the same epoch.
             self.holding = True
             try:
-                for _, msg in released.messages:
+                for key, msg in released.messages:
                     if not isinstance(msg, EpochAck | Percepts):
-                        await self.handle(msg)
+                        with dropping(self.ctx, key, msg):
+                            await self.handle(msg)
             finally:
                 self.holding = False
             await self.step()

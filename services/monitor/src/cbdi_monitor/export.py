@@ -1,7 +1,8 @@
 """`cbdi export run.mcap --json out.mcap`: the same recording in JSON encoding.
 
-Foxglove does not decode msgpack; the JSON copy keeps every channel, its metadata, each
-message's times and sequence, and the JSON Schema of each message type.
+Foxglove does not decode msgpack; the JSON copy keeps every channel, its metadata
+(`agent`, `component`, `stream`, `schema`), each message's times and sequence, and the
+JSON Schema of each message type. A source that does not read leaves no copy behind.
 """
 
 from __future__ import annotations
@@ -32,8 +33,20 @@ def _to_json(payload: bytes) -> bytes:
 
 def export_json(source: str | Path, target: str | Path) -> int:
     """Write `target` with every message of `source` as JSON; return the message count."""
+    try:
+        return _export(source, Path(target))
+    except CbdiError:
+        Path(target).unlink(missing_ok=True)  # half a copy would pass for a whole one
+        raise
+
+
+def _export(source: str | Path, target: Path) -> int:
     count = 0
-    with Path(target).open("wb") as out:
+    try:
+        out = target.open("wb")
+    except OSError as exc:
+        raise CbdiError(f"{target}: cannot write ({exc.strerror or exc})") from None
+    with out:
         writer = Writer(out, compression=CompressionType.ZSTD)
         writer.start(profile="cbdi", library="cbdi-monitor export")
         channels: dict[str, int] = {}
@@ -45,9 +58,8 @@ def export_json(source: str | Path, target: str | Path) -> int:
                 if data and m.schema not in schemas:
                     schema_id = writer.register_schema(m.schema, "jsonschema", data)
                     schemas[m.schema] = schema_id
-                channels[m.key] = writer.register_channel(
-                    m.key, "json", schema_id, {"schema": m.schema}
-                )
+                metadata = {**m.metadata, "schema": m.schema}
+                channels[m.key] = writer.register_channel(m.key, "json", schema_id, metadata)
             writer.add_message(channels[m.key], m.log_ns, _to_json(m.payload), m.publish_ns, m.seq)
             count += 1
         writer.finish()

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.exceptions import McapError
@@ -17,7 +17,7 @@ __all__ = ["RecordedMessage", "RecordingError", "read_messages"]
 
 @dataclass(frozen=True, slots=True)
 class RecordedMessage:
-    """One recorded message with its channel's key, schema name and encoding."""
+    """One recorded message with its channel's key, schema name, encoding and metadata."""
 
     key: str
     payload: bytes
@@ -26,6 +26,7 @@ class RecordedMessage:
     seq: int
     schema: str
     encoding: str
+    metadata: Mapping[str, str] = field(default_factory=dict)  # agent, component, stream
 
 
 def read_messages(path: str | Path, keys: list[str] | None = None) -> Iterator[RecordedMessage]:
@@ -47,6 +48,10 @@ def read_messages(path: str | Path, keys: list[str] | None = None) -> Iterator[R
                     seq=message.sequence,
                     schema=channel.metadata.get("schema", ""),
                     encoding=channel.message_encoding,
+                    metadata=channel.metadata,
                 )
         except (McapError, EOFError, ValueError, struct.error) as exc:  # struct: too short
             raise RecordingError(f"{p}: not a readable MCAP file ({exc})") from None
+        except Exception as exc:  # a damaged file fails deep in mcap or zstandard: seek, chunk
+            why = f"{type(exc).__name__}: {exc}"
+            raise RecordingError(f"{p}: not a readable MCAP file ({why})") from None

@@ -4,6 +4,11 @@ Each channel's metadata names the agent, the component, the stream and the schem
 its messages; the schema record carries the message's JSON Schema. Files are chunked and
 zstd-compressed, and rotate by size or duration when asked (`run.mcap`, `run-001.mcap`,
 ...). `close()` must run for the file to be readable: the service calls it on SIGTERM.
+
+Traffic that is no cbdi message (garbage a client sent, mirrored on the trace keys) is
+recorded only in part, so a flood of it cannot grow the file without limit: the first
+GARBAGE_PER_KEY samples per key and GARBAGE_TOTAL in all; the rest is counted in
+`dropped`, per key, and not written.
 """
 
 from __future__ import annotations
@@ -15,11 +20,13 @@ from typing import BinaryIO
 from mcap.writer import CompressionType, Writer
 
 from cbdi import keys
-from cbdi_monitor.schemas import json_schema, peek_schema
+from cbdi_monitor.schemas import json_schema, peek_schema, wire_classes
 
 __all__ = ["ENCODING", "McapRecorder", "Rotation"]
 
 ENCODING = "msgpack"
+GARBAGE_PER_KEY = 10  # samples without a known schema recorded per key
+GARBAGE_TOTAL = 1000  # and in all
 
 
 @dataclass(frozen=True)
@@ -53,6 +60,9 @@ class McapRecorder:
         self._opened_ns = 0
         self.closed = False
         self.late = 0  # messages that arrived after close (not written)
+        self.garbage: dict[str, int] = {}  # samples without a known schema, recorded
+        self._garbage_total = 0
+        self.dropped: dict[str, int] = {}  # and beyond the limits, not recorded
 
     def _open(self, log_ns: int) -> Writer:
         index = len(self.files)
@@ -98,11 +108,15 @@ class McapRecorder:
 
     def write(
         self, key: str, payload: bytes, log_ns: int, publish_ns: int = 0, seq: int = 0
-    ) -> None:
-        """Append one message; `log_ns` is the recorder's receive time."""
+    ) -> bool:
+        """Append one message; `log_ns` is the recorder's receive time. Return whether
+        it was written (not: after close, or garbage beyond the limits)."""
         if self.closed:
             self.late += 1
-            return
+            return False
+        if peek_schema(payload) not in wire_classes() and not self._keep_garbage(key):
+            self.dropped[key] = self.dropped.get(key, 0) + 1
+            return False
         writer = self._writer
         if writer is None or self._due_for_rotation(log_ns):
             self.finish_file()
@@ -118,6 +132,16 @@ class McapRecorder:
             sequence=seq & 0xFFFFFFFF,
         )
         self.counts[key] = self.counts.get(key, 0) + 1
+        return True
+
+    def _keep_garbage(self, key: str) -> bool:
+        """Whether to record one more sample without a known schema on `key`."""
+        here = self.garbage.get(key, 0)
+        if here >= GARBAGE_PER_KEY or self._garbage_total >= GARBAGE_TOTAL:
+            return False
+        self.garbage[key] = here + 1
+        self._garbage_total += 1
+        return True
 
     def finish_file(self) -> None:
         """Finish the current file (summary, index, footer) so it is readable."""

@@ -57,6 +57,7 @@ class Monitor:
                 "recorded",
                 files=",".join(map(str, self.recorder.files)),
                 messages=sum(self.recorder.counts.values()),
+                garbage_dropped=sum(self.recorder.dropped.values()),
             )
 
     async def drain_rest(self, it: object) -> None:
@@ -70,7 +71,14 @@ class Monitor:
             pass
 
     def write(self, sample: Sample) -> None:
-        self.recorder.write(sample.key, sample.payload, time.time_ns(), sample.sent_ns, sample.seq)
+        written = self.recorder.write(
+            sample.key, sample.payload, time.time_ns(), sample.sent_ns, sample.seq
+        )
+        if not written and not self.recorder.closed:
+            dropped = sum(self.recorder.dropped.values())
+            self.ctx.counters["garbage_dropped"] = dropped
+            if _sampled(dropped):
+                self.ctx.log.warning("garbage_dropped", key=sample.key, dropped=dropped)
 
     async def health(self, events: object) -> None:
         async for event in events:  # type: ignore[attr-defined]
@@ -86,6 +94,11 @@ class Monitor:
         log("service_up" if event.alive else "service_down", service=service)
         health = ServiceHealth(service=service, alive=event.alive, alive_now=sorted(self.alive))
         await self.ctx.bus.publish(keys.monitor_stream("health"), encode(health), block=True)
+
+
+def _sampled(n: int) -> bool:
+    """Log the 1st, 10th, 100th, ... drop: a flood costs a few log lines, not one each."""
+    return n > 0 and 10 ** (len(str(n)) - 1) == n
 
 
 def monitor_main(settings: MonitorSettings) -> ServiceMain:

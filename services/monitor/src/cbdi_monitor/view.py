@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -81,10 +83,39 @@ def _open_viewer(rrd: Path, web: bool, port: int) -> int:
             f"serving the rerun web viewer on http://127.0.0.1:{port} (Ctrl-C to stop)",
             file=sys.stderr,
         )
+    # Its own session, so that stopping it reaches what it starts; SIGTERM to us is
+    # passed on: the viewer never outlives `cbdi view` (it would hold the port).
+    child = subprocess.Popen(argv, start_new_session=True)
+    previous = signal.signal(signal.SIGTERM, _terminated)
     try:
-        return subprocess.call(argv)
+        return child.wait()
     except KeyboardInterrupt:
         return 0
+    except _Terminated:
+        return 128 + signal.SIGTERM
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        _stop(child)
+
+
+class _Terminated(Exception):
+    """SIGTERM arrived while the viewer ran."""
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise _Terminated
+
+
+def _stop(child: subprocess.Popen[bytes], grace: float = 5.0) -> None:
+    """End the viewer's process group: SIGTERM, then SIGKILL after `grace` seconds."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(child.pid, sig)
+        try:
+            child.wait(grace)
+            return
+        except subprocess.TimeoutExpired:
+            continue
 
 
 async def _live(rrd: str, bus_config: BusConfig, seconds: float) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -86,10 +87,20 @@ def parse_plan(text: str) -> Plan:
             )
         name = " ".join(match.group("name").lower().split())
         dur = match.group("dur")
+        time = _finite(match.group("time"), number, raw)
         out.append(
-            ScheduledAction(
-                float(match.group("time")), name, float(dur) if dur is not None else None
-            )
+            ScheduledAction(time, name, _finite(dur, number, raw) if dur is not None else None)
         )
     out.sort(key=lambda a: a.time)
     return Plan(tuple(out))
+
+
+def _finite(text: str, number: int, raw: str) -> float:
+    """Read a plan's time or duration: a finite number, or PlanInvalid naming the line."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise PlanInvalid(f"plan line {number}: {text!r} is not a finite number in {raw.strip()!r}")
+    return value

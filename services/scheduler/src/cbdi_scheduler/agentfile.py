@@ -16,10 +16,11 @@ from cbdi.agentfile import (
     AgentFileError,
     PlanningSettings,
     RawAgentFile,
+    domain_signature,
     parse_agent_text,
     read_agent_file,
 )
-from cbdi.beliefs import Belief
+from cbdi.beliefs import INSTANCE, Belief
 from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
@@ -67,6 +68,11 @@ def parse_agent(text: str, source: str, agent: str, base: Path) -> AgentFile:
 def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
     data, source, domain = raw.data, raw.source, raw.domain
     r = _Reader(source, data)
+    r.signature = _signature(source, domain)
+    r.private = frozenset(
+        r.check(p, str, f"private_predicates[{i}]")
+        for i, p in enumerate(r.opt(data, "private_predicates", list, []))
+    )
     bdi = r.table(data, "scheduler")
     preemption = r.choice(bdi, "preemption", PREEMPTION, "clean_preempt", "scheduler")
     return AgentFile(
@@ -75,10 +81,10 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         domain=domain,
         group=r.opt(data, "group", str, ""),
         allowed_groups=tuple(r.opt(data, "allowed_groups", list, [])),
-        detection_depth=r.opt(data, "detection_depth", int, None),
+        detection_depth=r.natural(data, "detection_depth", None),
         preemption=preemption,
-        plan_retries=r.opt(bdi, "plan_retries", int, 3, "scheduler"),
-        exec_retries=r.opt(bdi, "exec_retries", int, 3, "scheduler"),
+        plan_retries=r.natural(bdi, "plan_retries", 3, "scheduler"),
+        exec_retries=r.natural(bdi, "exec_retries", 3, "scheduler"),
         rtc_deadline=_rtc_deadline(r.opt(bdi, "rtc_deadline", float, 2.0, "scheduler"), source),
         claim=tuple(
             r.check(p, str, f"scheduler.claim[{i}]")
@@ -108,6 +114,8 @@ class _Reader:
 
     def __init__(self, source: str, data: dict[str, Any]) -> None:
         self.source, self.data = source, data
+        self.signature: dict[str, int] = {}  # the domain's predicates and functions
+        self.private: frozenset[str] = frozenset()  # beliefs only the scheduler keeps
 
     def fail(self, where: str, reason: str) -> AgentFileError:
         return AgentFileError(self.source, where, reason)
@@ -128,6 +136,39 @@ class _Reader:
             raise self.fail(where, f"expected {tp.__name__}, got {type(value).__name__}")
         return value
 
+    def natural(self, table: dict[str, Any], key: str, default: Any, prefix: str = "") -> Any:
+        value = self.opt(table, key, int, default, prefix)
+        if value is not None and value < 0:
+            where = f"{prefix}.{key}" if prefix else key
+            raise self.fail(where, f"expected an integer >= 0, got {value}")
+        return value
+
+    def number(
+        self, table: dict[str, Any], key: str, default: float, where: str, low: float, high: float
+    ) -> float:
+        value = self.opt(table, key, float, default, where)
+        if value is not default and not (math.isfinite(value) and low <= value <= high):
+            span = f"[{low:g}, {high:g}]" if math.isfinite(high) else f">= {low:g}"
+            raise self.fail(f"{where}.{key}", f"expected a finite number in {span}, got {value}")
+        return float(value)
+
+    def declared(self, belief: Belief, where: str, goal: bool = False) -> Belief:
+        """Fail unless the domain declares `belief`'s predicate or function (with its
+        arity), or, outside goals, the file lists it in `private_predicates`."""
+        if belief.kind == INSTANCE:
+            return belief
+        arity = self.signature.get(belief.name)
+        if arity is None:
+            if not goal and belief.name in self.private:
+                return belief
+            where_else = "" if goal else " nor in private_predicates"
+            raise self.fail(where, f"{belief.name!r} is not declared by the domain{where_else}")
+        if len(belief.params) != arity:
+            raise self.fail(
+                where, f"{belief.name!r} takes {arity} argument(s), got {len(belief.params)}"
+            )
+        return belief
+
     def table(self, data: dict[str, Any], key: str) -> dict[str, Any]:
         return self.opt(data, key, dict, {})
 
@@ -139,11 +180,12 @@ class _Reader:
             raise self.fail(f"{prefix}.{key}", f"expected one of {', '.join(options)}")
         return str(value)
 
-    def belief(self, text: Any, where: str) -> Belief:
+    def belief(self, text: Any, where: str, goal: bool = False) -> Belief:
         try:
-            return parse_belief(self.check(text, str, where))
+            belief = parse_belief(self.check(text, str, where))
         except (LiteralSyntaxError, ValueError) as exc:
             raise self.fail(where, str(exc)) from None
+        return self.declared(belief, where, goal)
 
     def condition(self, raw: Any, where: str) -> Condition:
         clauses = self.check(raw, list, where)
@@ -151,27 +193,28 @@ class _Reader:
         for i, clause in enumerate(clauses):
             texts = self.check(clause, list, f"{where}[{i}]")
             try:
-                out.append(
-                    tuple(
-                        parse_literal(self.check(t, str, f"{where}[{i}][{j}]"))
-                        for j, t in enumerate(texts)
-                    )
+                literals = tuple(
+                    parse_literal(self.check(t, str, f"{where}[{i}][{j}]"))
+                    for j, t in enumerate(texts)
                 )
             except (LiteralSyntaxError, ValueError) as exc:
                 raise self.fail(f"{where}[{i}]", str(exc)) from None
+            for j, lit in enumerate(literals):
+                self.declared(lit.belief, f"{where}[{i}][{j}]")
+            out.append(literals)
         return tuple(out)
 
     def desire(self, raw: Any, where: str) -> Desire:
         d = self.check(raw, dict, where)
         goal = tuple(
-            self.belief(g, f"{where}.goal[{i}]")
+            self.belief(g, f"{where}.goal[{i}]", goal=True)
             for i, g in enumerate(self.get(d, "goal", list, f"{where}.goal"))
         )
         return Desire(
             name=self.get(d, "name", str, f"{where}.name"),
             goal=goal,
-            priority=self.opt(d, "priority", float, 0.5, where),
-            deadline=self.opt(d, "deadline", float, NO_DEADLINE, where),
+            priority=self.number(d, "priority", 0.5, where, 0.0, 1.0),
+            deadline=self.number(d, "deadline", NO_DEADLINE, where, 0.0, math.inf),
             precondition=self.condition(d.get("precondition", []), f"{where}.precondition"),
             context=self.condition(d.get("context", []), f"{where}.context"),
         )
@@ -203,3 +246,10 @@ class _Reader:
             name = self.check(value, str, f"{where}.del_desire")
             return RuleEffect("desire", "DEL", desire=Desire(name=name, goal=()))
         raise self.fail(where, f"unknown effect {kind!r}")
+
+
+def _signature(source: str, domain: Path) -> dict[str, int]:
+    try:
+        return domain_signature(domain.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AgentFileError(source, "domain", f"cannot read {domain}: {exc}") from None

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 from cbdi.beliefs import Belief, fact, fluent, instance
@@ -60,9 +61,12 @@ def _atom(tree: Tree, text: str) -> tuple[str, tuple[str, ...]]:
 
 def _number(tok: Tree, text: str) -> float:
     try:
-        return float(str(tok))
+        value = float(str(tok))
     except ValueError:
         raise LiteralSyntaxError(f"{text!r}: expected a number, got {tok!r}") from None
+    if not math.isfinite(value):
+        raise LiteralSyntaxError(f"{text!r}: expected a finite number, got {tok!r}")
+    return value
 
 
 def parse_belief(text: str) -> Belief:

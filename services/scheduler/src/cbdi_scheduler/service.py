@@ -17,7 +17,7 @@ from msgspec.structs import replace
 from cbdi import keys
 from cbdi.beliefs import to_wire
 from cbdi.bus import publish, sequenced_inputs, serve
-from cbdi.bus.typed import Stamped
+from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.runtime import ServiceContext, ServiceSettings
@@ -120,8 +120,9 @@ class SchedulerService:
         ready = announce_ready(self.ctx.bus, self.agent, "scheduler", self.lockstep.decided)
         self.ctx.start(ready, name="ready")
         async for item in stream:
-            for _, m in await self.lockstep.put(item):
-                await self.on_message(m)
+            for key, m in await self.lockstep.put(item):
+                with dropping(self.ctx, key, m):
+                    await self.on_message(m)
 
     async def on_message(self, msg: Message) -> None:
         """React to one input and publish what follows (beliefs first after percepts)."""
@@ -166,8 +167,9 @@ class SchedulerService:
         released = await self.lockstep.gate.wait(needs, self.ack_timeout)
         if released.late:
             self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
-        for _, msg in released.messages:
-            await self.on_message(msg)
+        for key, msg in released.messages:
+            with dropping(self.ctx, key, msg):
+                await self.on_message(msg)
 
     async def watch_planner(self) -> None:
         """Send the search in progress again when the planner appears: a request sent

@@ -13,6 +13,7 @@ naming the file, the field (`grid row 3 column 5`, `people[1].path[4]`) and the 
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -76,6 +77,8 @@ def load_map(path: str | Path) -> WorldMap:
         raise MapError(str(p), "file", "not found") from None
     except OSError as exc:
         raise MapError(str(p), "file", str(exc)) from None
+    except UnicodeDecodeError as exc:
+        raise MapError(str(p), "file", f"not UTF-8 text (byte {exc.start})") from None
     return parse_map(text, str(p))
 
 
@@ -159,8 +162,9 @@ class _Reader:
 
     def positive(self, table: dict[str, Any], name: str, default: float) -> float:
         value = table.get(name.split(".")[-1], default)
-        if isinstance(value, bool) or not isinstance(value, int | float) or value <= 0:
-            raise self.fail(name, f"expected a number > 0, got {value!r}")
+        finite = isinstance(value, int | float) and math.isfinite(value)
+        if isinstance(value, bool) or not finite or value <= 0:
+            raise self.fail(name, f"expected a finite number > 0, got {value!r}")
         return float(value)
 
     def probability(self) -> float:

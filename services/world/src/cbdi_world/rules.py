@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from cbdi.wire.world import ActionRequest, Cell
+from cbdi.wire.world import ActionRequest, Cell, OutcomeStatus
 
 if TYPE_CHECKING:
     from cbdi_world.world import AgentState, World
@@ -103,7 +103,7 @@ def _check_recycle(
     return "", None, item
 
 
-def complete(world: World, agent: AgentState, action: Action) -> tuple[str, str]:
+def complete(world: World, agent: AgentState, action: Action) -> tuple[OutcomeStatus, str]:
     """Apply the end of `action`; return (status, reason)."""
     if action.name == "move":
         return _complete_move(world, agent, action)
@@ -117,7 +117,7 @@ def complete(world: World, agent: AgentState, action: Action) -> tuple[str, str]
     return "succeeded", ""
 
 
-def fail(world: World, agent: AgentState, action: Action, reason: str) -> tuple[str, str]:
+def fail(world: World, agent: AgentState, action: Action, reason: str) -> tuple[OutcomeStatus, str]:
     """End `action` as failed, undoing what it did at start; return (status, reason).
 
     A move leaves the robot in its cell; a pickup leaves the item on the ground of the cell
@@ -133,7 +133,7 @@ def fail(world: World, agent: AgentState, action: Action, reason: str) -> tuple[
     return "failed", reason
 
 
-def _complete_move(world: World, agent: AgentState, action: Action) -> tuple[str, str]:
+def _complete_move(world: World, agent: AgentState, action: Action) -> tuple[OutcomeStatus, str]:
     target = action.target
     assert target is not None
     reason = ""

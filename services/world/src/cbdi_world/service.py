@@ -17,6 +17,7 @@ from msgspec.structs import replace
 
 from cbdi import keys
 from cbdi.bus import messages, publish, serve
+from cbdi.bus.typed import dropping
 from cbdi.clock import Clock, WallClock
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
@@ -173,7 +174,8 @@ class WorldService:
             if ack.agent not in self.agents:
                 self.ctx.bad_input(key, UnknownAgentError(ack.agent))
                 continue
-            await self.acks.observe(ack)
+            with dropping(self.ctx, key, ack):
+                await self.acks.observe(ack)
 
     async def run(self) -> None:
         """Publish epoch 0, then step until the run ends; keep serving requests after."""

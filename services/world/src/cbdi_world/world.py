@@ -22,6 +22,7 @@ from cbdi.wire.world import (
     BinView,
     Cell,
     LitterView,
+    OutcomeStatus,
     Percepts,
     PersonView,
     WorldInfo,
@@ -258,7 +259,7 @@ class World:
             )
         return outcomes
 
-    def _end(self, agent: AgentState, action: Action) -> tuple[str, str]:
+    def _end(self, agent: AgentState, action: Action) -> tuple[OutcomeStatus, str]:
         """Complete `action`, unless the seeded failure draw (one per action) fails it."""
         p = self.chance.failure_probability
         if fails(p, self._stream(f"failures:{agent.spec.name}")):

@@ -2,24 +2,27 @@
 
 Bad input never kills the caller: an undecodable sample is handed to the `ErrorSink`
 (which logs, counts and reports it) and skipped; a bad request is answered with an
-`ErrorReply` naming what was wrong.
+`ErrorReply` naming what was wrong; a message loop handles each valid message inside
+`dropping`, so one whose handling fails is reported and dropped, and the loop goes on.
 """
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import NamedTuple, Protocol, TypeVar
 
 from cbdi import keys
 from cbdi.bus.base import Bus, Subscription
-from cbdi.errors import CbdiError, RequestFailedError, WireError
-from cbdi.wire.base import Message, decode, decode_any, encode
+from cbdi.errors import CbdiError, RejectedInputError, RequestFailedError, WireError
+from cbdi.wire.base import Message, decode, decode_any, encode, schema_of, sender_of
 from cbdi.wire.common import ErrorReply
 
 __all__ = [
     "ErrorSink",
     "LogSink",
     "Stamped",
+    "dropping",
     "inputs",
     "messages",
     "publish",
@@ -51,6 +54,26 @@ class LogSink:
 
     def crashed(self, key: str, error: Exception) -> None:
         self.errors.append((key, error))
+
+
+@contextmanager
+def dropping(sink: ErrorSink, key: str, message: Message) -> Iterator[None]:
+    """Handle one input inside this: if handling fails, report it and drop the message.
+
+    A domain error (`CbdiError`, or `ValueError` from the pure core refusing a value)
+    is bad input, named by schema, sender and key; anything else is a handler bug,
+    logged with its trace as a crash. Either way the message loop goes on: a service
+    never dies of what it was sent.
+    """
+    try:
+        yield
+    except (CbdiError, ValueError) as exc:
+        reason = str(exc) or type(exc).__name__
+        code = str(getattr(exc, "code", "rejected"))
+        schema, sender = schema_of(type(message)), sender_of(message)
+        sink.bad_input(key, RejectedInputError(schema, reason, key, sender, code))
+    except Exception as exc:
+        sink.crashed(key, exc)
 
 
 async def publish(bus: Bus, key: str, message: Message, *, block: bool = False) -> None:

@@ -20,6 +20,8 @@ from cbdi.launcher.scenario import (
     AGENT_KINDS,
     Scenario,
     check_chance,
+    check_ranges,
+    check_until,
     find_scenario,
     load_scenario,
 )
@@ -118,13 +120,7 @@ def _scenario(args: argparse.Namespace) -> Scenario:
     scenario = load_scenario(find_scenario(args.scenario))
     run = scenario.run
     if args.until is not None:
-        if args.until != "done":
-            try:
-                if float(args.until) <= 0:
-                    raise ValueError
-            except ValueError:
-                raise ConfigError("--until", "until", "expected 'done' or seconds > 0") from None
-        run = replace(run, until=args.until)
+        run = replace(run, until=check_until(args.until, "--until", "until"))
     for name in (
         "speed",
         "seed",
@@ -148,7 +144,7 @@ def _scenario(args: argparse.Namespace) -> Scenario:
         raise ConfigError("--speed", "speed", "must be > 0 (0, flat out, only with --lockstep)")
     if not math.isfinite(run.planning_speed) or run.planning_speed < 0:
         raise ConfigError("--planning-speed", "planning_speed", "must be a finite number > 0")
-    problems = check_chance(run)
+    problems = check_chance(run) + check_ranges(run)
     if problems:
         field, reason = problems[0]
         raise ConfigError(f"--{field.replace('_', '-')}", field, reason)

@@ -203,8 +203,8 @@ async def launch(
                 scenario=scenario.name,
                 services={p.spec.service: list(p.spec.args) for p in procs},
             )
-            bus = await _start_all(procs, endpoint, opts, tg, summary, planners, launched)
-            await _await_end(bus, procs, scenario, opts, tg, summary, say)
+            bus, ends = await _start_all(procs, endpoint, opts, tg, summary, planners, launched)
+            await _await_end(bus, ends, procs, scenario, opts, tg, summary)
             raise _Done
     except* _Done:
         pass
@@ -238,7 +238,7 @@ async def _start_all(
     summary: RunSummary,
     planners: tally.PlannerTally,
     launched: RunLaunched,
-) -> Bus:
+) -> tuple[Bus, asyncio.Queue[RunFinished]]:
     summary.result = "starting"
     router, rest = procs[0], procs[1:]
     await router.start()
@@ -246,6 +246,12 @@ async def _start_all(
     bus = await open_bus(BusConfig(connect=(endpoint,), connect_timeout=opts.startup_timeout))
     live = _Liveliness()
     tg.create_task(live.follow(bus))
+    # The world's last word, heard from before it starts: a short run (`--until 1`) may
+    # end before every agent service is seen alive. A task reads it from now on (a
+    # subscription nobody iterates is never closed, and keeps the interpreter alive).
+    ends: asyncio.Queue[RunFinished] = asyncio.Queue()
+    events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
+    tg.create_task(_forward(events, ends))
     # Subscribed before any agent starts, so the tally misses none of their messages.
     tg.create_task(_count(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
     act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
@@ -273,7 +279,14 @@ async def _start_all(
             tg.create_task(group[i].supervise())
         await _wait_alive(live, group, opts)
     summary.result = "running"
-    return bus
+    return bus, ends
+
+
+async def _forward(
+    stream: AsyncIterator[tuple[str, RunFinished]], to: asyncio.Queue[RunFinished]
+) -> None:
+    async for _, msg in stream:
+        to.put_nowait(msg)
 
 
 async def _router_is_ours(router: ManagedProcess, endpoint: str, opts: LaunchOptions) -> None:
@@ -336,12 +349,12 @@ async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: Laun
 
 async def _await_end(
     bus: Bus,
+    ends: asyncio.Queue[RunFinished],
     procs: list[ManagedProcess],
     scenario: Scenario,
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
-    say: Callable[[str, str], None],
 ) -> None:
     ended: asyncio.Future[str] = asyncio.get_running_loop().create_future()
 
@@ -350,8 +363,8 @@ async def _await_end(
             ended.set_result(reason)
 
     async def finished() -> None:
-        sink = LogSink()
-        async for _, msg in messages(bus, keys.world_stream("events"), RunFinished, sink):
+        while True:
+            msg = await ends.get()
             summary.epochs, summary.sim_time = msg.epoch, msg.time
             summary.stalls = dict(sorted(msg.stalls.items()))
             summary.requests, summary.trace_digest = msg.requests, msg.trace_digest

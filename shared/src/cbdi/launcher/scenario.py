@@ -26,6 +26,7 @@ A scenario lives in `domains/recycling/scenarios/<name>.toml`:
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from dataclasses import dataclass, replace
@@ -42,6 +43,8 @@ __all__ = [
     "RunSettings",
     "Scenario",
     "check_chance",
+    "check_ranges",
+    "check_until",
     "find_scenario",
     "load_scenario",
 ]
@@ -91,6 +94,48 @@ PLANNING_MODES = ("", "online", "offline")
 def check_chance(run: RunSettings) -> list[tuple[str, str]]:
     """Return `(field, reason)` for each of the world's chance options out of range."""
     return chance_problems(run.people_jitter, run.duration_noise, run.failure_probability)
+
+
+# The lowest value of each numeric run setting; NaN and infinities never pass.
+_LOWEST: dict[str, float] = {
+    "speed": 0.0,
+    "seed": 0,
+    "max_time": 0.0,
+    "move_step": 0,
+    "det_area": -1,
+    "known_litter": -1,
+    "planning_speed": 0.0,
+}
+
+
+def check_ranges(run: RunSettings) -> list[tuple[str, str]]:
+    """Return `(field, reason)` for each numeric run setting out of its range."""
+    problems = []
+    for name, low in _LOWEST.items():
+        value = getattr(run, name)
+        if not (math.isfinite(value) and value >= low) or (name == "max_time" and value == 0):
+            bound = "above 0" if name == "max_time" else f">= {low:g}"
+            problems.append((name, f"expected a finite number {bound}, got {value!r}"))
+    if not (run.spawn == -1 or 0 <= run.spawn <= 1):
+        problems.append(("spawn", f"expected a probability in [0, 1] (or -1), got {run.spawn!r}"))
+    return problems
+
+
+def check_until(value: object, where: str, field: str) -> str:
+    """Return `until` as the launcher keeps it: `done` or a finite number of seconds > 0."""
+    if value == "done":
+        return "done"
+    number = value
+    if isinstance(value, str):
+        try:
+            number = float(value)
+        except ValueError:
+            number = None
+    if isinstance(number, bool) or not isinstance(number, int | float):
+        raise ConfigError(where, field, f"expected 'done' or seconds > 0, got {value!r}")
+    if not (math.isfinite(number) and number > 0):
+        raise ConfigError(where, field, f"expected 'done' or seconds > 0, got {value!r}")
+    return str(value)
 
 
 @dataclass(frozen=True)
@@ -149,7 +194,11 @@ def load_scenario(path: Path) -> Scenario:
     """Load and validate a scenario file; errors name the file and the field."""
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except OSError as exc:
+        raise ConfigError(str(path), "file", exc.strerror or str(exc)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(str(path), "file", f"not UTF-8 text (byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), "toml", str(exc)) from None
     where = str(path)
     map_rel = _get(data, "map", str, where)
@@ -219,11 +268,12 @@ def _run(raw: Any, where: str) -> RunSettings:
             continue
         value = raw[field]
         if field == "until":
-            value = str(value)
-        elif isinstance(default, float) and isinstance(value, int):
+            value = check_until(value, where, "run.until")
+        elif isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
-        if not isinstance(value, type(default)):
-            raise ConfigError(where, f"run.{field}", f"expected {type(default).__name__}")
+        if not isinstance(value, type(default)) or isinstance(value, bool) != (default is False):
+            want, got = type(default).__name__, type(value).__name__
+            raise ConfigError(where, f"run.{field}", f"expected {want}, got {got}")
         values[field] = value
     if values.get("mode", "") not in PLANNING_MODES:
         raise ConfigError(where, "run.mode", f"expected one of {', '.join(PLANNING_MODES[1:])}")
@@ -231,7 +281,7 @@ def _run(raw: Any, where: str) -> RunSettings:
     if unknown:
         raise ConfigError(where, "run", f"unknown settings: {', '.join(sorted(unknown))}")
     run = replace(base, **values)
-    problems = check_chance(run)
+    problems = check_chance(run) + check_ranges(run)
     if problems:
         field, reason = problems[0]
         raise ConfigError(where, f"run.{field}", reason)

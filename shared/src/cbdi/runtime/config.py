@@ -79,6 +79,10 @@ def _from_file(path: str, section: str) -> dict[str, Any]:
         data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(path, "--config", "file not found") from None
+    except OSError as exc:
+        raise ConfigError(path, "--config", exc.strerror or str(exc)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(path, "--config", f"not UTF-8 text (byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(path, "toml", str(exc)) from None
     table = data.get(section, data)

@@ -29,6 +29,8 @@ from cbdi.wire.common import ErrorReport
 
 __all__ = ["ServiceContext", "ServiceSettings", "run_service"]
 
+MAX_PENDING_REPORTS = 1000  # error reports waiting to be published
+
 
 @dataclass(frozen=True)
 class ServiceSettings:
@@ -69,7 +71,8 @@ class ServiceContext:
         self.exit_code = 0
         self._tg: asyncio.TaskGroup | None = None
         self._stopping = asyncio.Event()
-        self._reports: asyncio.Queue[ErrorReport] = asyncio.Queue()
+        # Bounded: a flood of bad input costs counted, dropped reports, not memory.
+        self._reports: asyncio.Queue[ErrorReport] = asyncio.Queue(MAX_PENDING_REPORTS)
 
     def start(self, coro: Coroutine[Any, Any, Any], name: str | None = None) -> asyncio.Task[Any]:
         """Run `coro` as a task of the service's TaskGroup."""
@@ -86,7 +89,8 @@ class ServiceContext:
     def bad_input(self, key: str, error: CbdiError) -> None:
         code = getattr(error, "code", type(error).__name__)
         self.counters[f"bad_input.{code}"] += 1
-        self.log.warning("bad_input", key=key, code=code, error=str(error))
+        sender = getattr(error, "sender", "") or "unknown"
+        self.log.warning("bad_input", key=key, sender=sender, code=code, error=str(error))
         self._report(key, str(code), str(error))
 
     def crashed(self, key: str, error: Exception) -> None:
@@ -99,7 +103,10 @@ class ServiceContext:
     def _report(self, key: str, code: str, message: str) -> None:
         total = sum(v for k, v in self.counters.items() if k.startswith("bad_input"))
         report = ErrorReport(service=self.service, key=key, code=code, message=message, count=total)
-        self._reports.put_nowait(report)
+        try:
+            self._reports.put_nowait(report)
+        except asyncio.QueueFull:
+            self.counters["error_reports_dropped"] += 1
 
     async def _publish_reports(self) -> None:
         while True:

@@ -8,7 +8,23 @@ its `baseline` (empty: a new plan); a plan with a different baseline replaces th
 
 from __future__ import annotations
 
+from typing import Annotated, Literal, get_args
+
+import msgspec
+
 from cbdi.wire.base import Message
+from cbdi.wire.fields import (
+    MAX_ITEMS,
+    AgentName,
+    Atom,
+    Epoch,
+    Finite,
+    Id,
+    Many,
+    NonNegative,
+    Symbol,
+    Text,
+)
 
 __all__ = [
     "STEP_STATUSES",
@@ -18,14 +34,20 @@ __all__ = [
     "ArrestReport",
     "BeliefsUpdate",
     "Check",
+    "CheckOp",
     "Claim",
     "DesireEvent",
     "EarlyArrest",
     "PartialPlan",
     "PlanStep",
+    "RequestOp",
+    "StepStatus",
 ]
 
-STEP_STATUSES = ("waiting", "running", "succeeded", "failed", "refused", "cancelled")
+StepStatus = Literal["waiting", "running", "succeeded", "failed", "refused", "cancelled"]
+STEP_STATUSES: tuple[str, ...] = get_args(StepStatus)
+CheckOp = Literal["T", "F", "EQ", "NE", "LT", "LE", "GT", "GE"]
+RequestOp = Literal["check_belief", "add_belief", "check_desire", "add_desire"]
 
 
 class Check(Message, frozen=True, tag="cbdi.agent.Check/1"):
@@ -35,21 +57,25 @@ class Check(Message, frozen=True, tag="cbdi.agent.Check/1"):
     function's value with `value`: `EQ`, `NE`, `LT`, `LE`, `GT`, `GE`.
     """
 
-    atom: list[str]
-    op: str = "T"
-    value: float = 0.0
+    atom: Atom
+    op: CheckOp = "T"
+    value: Finite = 0.0
+
+
+# The conditions of one step: bounded, however the plan came about.
+Checks = Annotated[list[Check], msgspec.Meta(max_length=1000)]
 
 
 class PlanStep(Message, frozen=True, tag="cbdi.agent.PlanStep/1"):
     """One durative action of a time-triggered plan."""
 
-    step_id: str
-    action: str
-    args: list[str]
-    start: float
-    duration: float
-    at_start: list[Check] = []
-    over_all: list[Check] = []
+    step_id: Symbol
+    action: Symbol
+    args: Annotated[list[Symbol], msgspec.Meta(max_length=32)]
+    start: Finite
+    duration: NonNegative
+    at_start: Checks = []
+    over_all: Checks = []
 
 
 class PartialPlan(Message, frozen=True, tag="cbdi.agent.PartialPlan/1"):
@@ -60,65 +86,65 @@ class PartialPlan(Message, frozen=True, tag="cbdi.agent.PartialPlan/1"):
     runs this one.
     """
 
-    agent: str
-    plan_id: str
-    baseline: str
-    steps: list[PlanStep]
+    agent: AgentName
+    plan_id: Symbol
+    baseline: Id
+    steps: Many[PlanStep]
     complete: bool = False
-    applies_after: str = ""
+    applies_after: Id = ""
 
 
 class ActionStatus(Message, frozen=True, tag="cbdi.agent.ActionStatus/1"):
     """How a plan step is doing: waiting, running, succeeded, failed, refused, cancelled."""
 
-    agent: str
-    plan_id: str
-    step_id: str
-    action: str
-    status: str
-    reason: str
-    time: float
+    agent: AgentName
+    plan_id: Id
+    step_id: Id
+    action: Id
+    status: StepStatus
+    reason: Text
+    time: Finite
 
 
 class EarlyArrest(Message, frozen=True, tag="cbdi.agent.EarlyArrest/1"):
     """Ask the executor to start nothing after `after_step` of `plan_id`."""
 
-    agent: str
-    plan_id: str
-    after_step: str
+    agent: AgentName
+    plan_id: Id
+    after_step: Id
 
 
 class ArrestReport(Message, frozen=True, tag="cbdi.agent.ArrestReport/1"):
     """The executor stopped: every step up to `last_step` ended; nothing after started."""
 
-    agent: str
-    plan_id: str
-    last_step: str
-    time: float
-    cancelled: list[str]
+    agent: AgentName
+    plan_id: Id
+    last_step: Id
+    time: Finite
+    cancelled: Many[Id]
 
 
 class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
     """The agent's whole belief set, published by the scheduler on every change."""
 
-    agent: str
-    time: float
-    instances: dict[str, str]
-    facts: list[list[str]]
-    fluents: list[tuple[list[str], float]]
-    epoch: int = -1  # the world epoch whose percepts these beliefs include
+    agent: AgentName
+    time: Finite
+    instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)]
+    facts: Many[Atom]
+    fluents: Many[tuple[Atom, Finite]]
+    epoch: Epoch = -1  # the world epoch whose percepts these beliefs include
 
 
 class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
     """A desire was added, boosted, reduced (goal atoms claimed by other agents), activated,
     achieved or dropped (with the reason)."""
 
-    agent: str
-    desire: str
-    event: str
-    reason: str
-    time: float
-    goal: list[list[str]] = []
+    agent: AgentName
+    desire: Symbol
+    event: Symbol
+    reason: Text
+    time: Finite
+    goal: Many[Atom] = []
 
 
 class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
@@ -129,14 +155,14 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     if `group` is one of this agent's allowed groups.
     """
 
-    from_agent: str
-    group: str
-    op: str
-    belief: str = ""
-    desire: str = ""
-    goal: list[str] = []
-    priority: float = 0.5
-    deadline: float = 0.0
+    from_agent: AgentName
+    group: Symbol
+    op: RequestOp
+    belief: Text = ""
+    desire: Id = ""
+    goal: Annotated[list[Text], msgspec.Meta(max_length=1000)] = []
+    priority: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.5
+    deadline: NonNegative = 0.0
 
 
 class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
@@ -144,7 +170,7 @@ class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
 
     accepted: bool
     holds: bool = False
-    reason: str = ""
+    reason: Text = ""
 
 
 class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
@@ -154,9 +180,9 @@ class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     it), then the first agent name owns the object; the others leave it.
     """
 
-    agent: str
-    group: str
-    item: str
-    epoch: int = -1
-    cost: float = 0.0
+    agent: AgentName
+    group: Symbol
+    item: Symbol
+    epoch: Epoch = -1
+    cost: Finite = 0.0
     released: bool = False

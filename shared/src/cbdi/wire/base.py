@@ -8,13 +8,14 @@ tolerated so that newer senders can talk to older receivers.
 
 from __future__ import annotations
 
+import sys
 from typing import Any, TypeVar
 
 import msgspec
 
 from cbdi.errors import WireError
 
-__all__ = ["Message", "decode", "decode_any", "encode", "schema_of"]
+__all__ = ["Message", "decode", "decode_any", "encode", "schema_of", "sender_of"]
 
 M = TypeVar("M", bound="Message")
 
@@ -39,6 +40,32 @@ def schema_of(cls: type[Message]) -> str:
     return str(tag)
 
 
+def sender_of(message: object) -> str:
+    """Return who sent `message` by its own word (`agent` or `from_agent`), or ""."""
+    for name in ("from_agent", "agent"):
+        value = getattr(message, name, None)
+        if isinstance(value, str) and value:
+            return value[:64]
+    return ""
+
+
+class _Sender(msgspec.Struct):
+    """The sender fields of any message, read leniently to name who sent a bad one."""
+
+    agent: Any = None
+    from_agent: Any = None
+
+
+_sender_decoder = msgspec.msgpack.Decoder(_Sender)
+
+
+def _peek(payload: bytes) -> str:
+    try:
+        return sender_of(_sender_decoder.decode(payload))
+    except msgspec.DecodeError:
+        return ""
+
+
 def encode(message: Message) -> bytes:
     """Encode a message as msgpack bytes."""
     return _encoder.encode(message)
@@ -53,7 +80,7 @@ def decode(payload: bytes, cls: type[M], key: str | None = None) -> M:
     try:
         return decoder.decode(payload)  # type: ignore[no-any-return]
     except msgspec.DecodeError as exc:
-        raise WireError(schema_of(cls), _explain(exc, payload), key) from None
+        raise WireError(schema_of(cls), _explain(exc, payload), key, _peek(payload)) from None
 
 
 def decode_any(
@@ -69,7 +96,7 @@ def decode_any(
         return decoder.decode(payload)  # type: ignore[no-any-return]
     except msgspec.DecodeError as exc:
         names = " | ".join(schema_of(c) for c in classes)
-        raise WireError(names, _explain(exc, payload), key) from None
+        raise WireError(names, _explain(exc, payload), key, _peek(payload)) from None
 
 
 _union_decoders: dict[tuple[type[Message], ...], msgspec.msgpack.Decoder[Any]] = {}
@@ -91,4 +118,11 @@ def _explain(exc: msgspec.DecodeError, payload: bytes) -> str:
         return f"garbage bytes, not msgpack ({len(payload)} bytes)"
     if "at `$.schema`" in text:
         return f"wrong schema ({text})"
+    for bound in (_LOW, _HIGH):  # the bounds of `Finite`: NaN and infinities fail them
+        if bound in text:
+            return "expected a finite number" + text[text.index(bound) + len(bound) :]
     return text
+
+
+_HIGH = f"Expected `float` <= {sys.float_info.max!r}"
+_LOW = f"Expected `float` >= {-sys.float_info.max!r}"

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+from typing import Annotated
+
+import msgspec
+
 from cbdi.wire.base import Message
+from cbdi.wire.fields import Count, Finite, Id, Many, Symbol, Text
 
 __all__ = [
     "ErrorReply",
@@ -20,31 +25,31 @@ class ErrorReply(Message, frozen=True, tag="cbdi.ErrorReply/1"):
     Codes in use: `bad_message` (undecodable payload), `unknown_agent`, `internal`.
     """
 
-    code: str
-    message: str
+    code: Id
+    message: Text
 
 
 class ErrorReport(Message, frozen=True, tag="cbdi.ErrorReport/1"):
     """Report bad input a service received and survived, on its error stream."""
 
-    service: str
-    key: str
-    code: str
-    message: str
-    count: int
+    service: Id
+    key: Text
+    code: Id
+    message: Text
+    count: Count
 
 
 class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     """Announce that a run ended: `reason` is `done` (all litter recycled) or `time_limit`."""
 
-    reason: str
-    epoch: int
-    time: float
+    reason: Symbol
+    epoch: Count
+    time: Finite
     # Lockstep: members that missed the ack timeout, with how many epochs they stalled.
-    stalls: dict[str, int] = {}
+    stalls: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=10_000)] = {}
     # The world's request trace: how many requests, and the digest of all of them.
-    requests: int = 0
-    trace_digest: str = ""
+    requests: Count = 0
+    trace_digest: Id = ""
 
 
 class RunLaunched(Message, frozen=True, tag="cbdi.RunLaunched/1"):
@@ -54,20 +59,20 @@ class RunLaunched(Message, frozen=True, tag="cbdi.RunLaunched/1"):
     tells how to build any of its services again (`cbdi replay --check`).
     """
 
-    scenario: str
-    services: dict[str, list[str]]
+    scenario: Text
+    services: Annotated[dict[Symbol, Many[Text]], msgspec.Meta(max_length=10_000)]
 
 
 class Liveliness(Message, frozen=True, tag="cbdi.Liveliness/1"):
     """A liveliness token appeared or vanished (as recorded by the monitor)."""
 
-    key: str
+    key: Text
     alive: bool
 
 
 class ServiceHealth(Message, frozen=True, tag="cbdi.ServiceHealth/1"):
     """The monitor's word that a service appeared or disappeared, and who is alive now."""
 
-    service: str
+    service: Text
     alive: bool
-    alive_now: list[str]
+    alive_now: Many[Text]

@@ -2,19 +2,28 @@
 
 from __future__ import annotations
 
+from typing import Annotated, Literal, get_args
+
+import msgspec
+
 from cbdi.wire.base import Message
+from cbdi.wire.fields import AgentName, Atom, Count, Finite, Id, Problem, Symbol, Text
 
 __all__ = [
     "FORECAST_KINDS",
     "SEARCH_KINDS",
     "SEARCH_STATUSES",
     "ForecastReport",
+    "SearchKind",
     "SearchRequest",
     "SearchRound",
     "SearchStatus",
 ]
 
-SEARCH_KINDS = ("start", "revise", "cancel")
+SearchKind = Literal["start", "revise", "cancel"]
+SEARCH_KINDS: tuple[str, ...] = get_args(SearchKind)
+# Reports the planner sends (status, forecast kind) are bounded names; a receiver acts
+# only on the values it knows ("failed", "fails_in_committed"), so others are inert.
 SEARCH_STATUSES = ("searching", "failed", "done", "cancelled")
 FORECAST_KINDS = ("fails_in_committed", "fails_after_committed", "holds")
 
@@ -28,21 +37,21 @@ class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
     goal when `goal` is empty. It lets a user drive one planner service directly.
     """
 
-    agent: str
-    request_id: str
-    kind: str
-    desire: str = ""
-    goal: list[list[str]] = []
-    problem: str = ""
+    agent: AgentName
+    request_id: Symbol
+    kind: SearchKind
+    desire: Id = ""
+    goal: Annotated[list[Atom], msgspec.Meta(max_length=10_000)] = []
+    problem: Problem = ""
 
 
 class SearchStatus(Message, frozen=True, tag="cbdi.planner.SearchStatus/1"):
     """How the planner's search for `request_id` is going."""
 
-    agent: str
-    request_id: str
-    status: str
-    reason: str = ""
+    agent: AgentName
+    request_id: Id
+    status: Symbol
+    reason: Text = ""
 
 
 class SearchRound(Message, frozen=True, tag="cbdi.planner.SearchRound/1"):
@@ -54,28 +63,28 @@ class SearchRound(Message, frozen=True, tag="cbdi.planner.SearchRound/1"):
     the best state; `plan_actions` how many actions its plan adds.
     """
 
-    agent: str
-    request_id: str
-    plan_id: str
-    purpose: str
-    number: int
-    kind: str
-    mode: str
-    expanded: int
-    seconds: float
+    agent: AgentName
+    request_id: Id
+    plan_id: Id
+    purpose: Id
+    number: Count
+    kind: Id
+    mode: Id
+    expanded: Count
+    seconds: Finite
     best_h: int
-    plan_actions: int
-    time: float
+    plan_actions: Count
+    time: Finite
 
 
 class ForecastReport(Message, frozen=True, tag="cbdi.planner.ForecastReport/1"):
     """The failure forecast of the executing plan: `kind` is one of FORECAST_KINDS;
     `failed_step` the step that would fail, `committed` the last committed step."""
 
-    agent: str
-    plan_id: str
-    kind: str
-    failed_step: str
-    reason: str
-    committed: str
-    time: float
+    agent: AgentName
+    plan_id: Id
+    kind: Symbol
+    failed_step: Id
+    reason: Text
+    committed: Id
+    time: Finite

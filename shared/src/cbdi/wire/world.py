@@ -11,6 +11,18 @@ from typing import Annotated, Literal
 import msgspec
 
 from cbdi.wire.base import Message
+from cbdi.wire.fields import (
+    AgentName,
+    Cell,
+    Count,
+    Epoch,
+    Finite,
+    Id,
+    Many,
+    NonNegative,
+    Symbol,
+    Text,
+)
 
 __all__ = [
     "ActionOutcome",
@@ -22,6 +34,7 @@ __all__ = [
     "Cell",
     "EpochAck",
     "LitterView",
+    "OutcomeStatus",
     "Percepts",
     "PersonView",
     "StatsRequest",
@@ -32,8 +45,9 @@ __all__ = [
     "WorldStats",
 ]
 
-Cell = tuple[int, int]
-Pose = tuple[float, float]
+Pose = tuple[Finite, Finite]
+
+OutcomeStatus = Literal["succeeded", "failed"]
 
 # Action names the world accepts; durations come from the recycling domain.
 ACTIONS = ("move", "pickup", "recycle")
@@ -42,10 +56,10 @@ ACTIONS = ("move", "pickup", "recycle")
 class Tick(Message, frozen=True, tag="cbdi.world.Tick/1"):
     """Publish the world's clock once per epoch: the simulated clock follows this."""
 
-    epoch: int
-    time: float
-    epoch_duration: float
-    speed: float
+    epoch: Count
+    time: NonNegative
+    epoch_duration: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
+    speed: NonNegative
     lockstep: bool
 
 
@@ -57,41 +71,41 @@ class ActionRequest(Message, frozen=True, tag="cbdi.world.ActionRequest/1"):
     first held) into a bin next to the agent.
     """
 
-    agent: str
-    action: str
-    request_id: str
+    agent: AgentName
+    action: Symbol
+    request_id: Symbol
     target: Cell | None = None
-    item: str | None = None
+    item: Symbol | None = None
 
 
 class ActionReply(Message, frozen=True, tag="cbdi.world.ActionReply/1"):
     """Answer an `ActionRequest` at once: accepted (with when it ends) or rejected and why."""
 
-    request_id: str
+    request_id: Id
     accepted: bool
-    reason: str = ""
-    starts_at: float = 0.0
-    ends_at: float = 0.0
+    reason: Text = ""
+    starts_at: Finite = 0.0
+    ends_at: Finite = 0.0
 
 
 class ActionOutcome(Message, frozen=True, tag="cbdi.world.ActionOutcome/1"):
     """Report how an accepted action ended: `succeeded` or `failed` with a reason."""
 
-    agent: str
-    request_id: str
-    action: str
-    status: str
-    reason: str
-    epoch: int
-    time: float
+    agent: AgentName
+    request_id: Symbol
+    action: Symbol
+    status: OutcomeStatus
+    reason: Text
+    epoch: Count
+    time: NonNegative
     target: Cell | None = None
-    item: str | None = None
+    item: Symbol | None = None
 
 
 class LitterView(Message, frozen=True, tag="cbdi.world.LitterView/1"):
     """One litter item lying on a cell; `known` says whether agents knew it from the start."""
 
-    name: str
+    name: Symbol
     cell: Cell
     known: bool = True
 
@@ -104,31 +118,31 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     itself only in `position`). `litter` lists the items lying in the square.
     """
 
-    agent: str
-    epoch: int
-    time: float
+    agent: AgentName
+    epoch: Count
+    time: NonNegative
     position: Cell
-    depth: int
-    free: list[Cell]
-    blocked: list[Cell]
-    litter: list[LitterView]
-    holding: list[str]
+    depth: Annotated[int, msgspec.Meta(ge=0, le=1000)]
+    free: Many[Cell]
+    blocked: Many[Cell]
+    litter: Many[LitterView]
+    holding: Many[Symbol]
 
 
 class AgentView(Message, frozen=True, tag="cbdi.world.AgentView/1"):
     """One robot in a snapshot: logical cell, continuous pose, load and current action."""
 
-    name: str
+    name: AgentName
     cell: Cell
     pose: Pose
-    holding: list[str]
-    action: str = ""
+    holding: Many[Symbol]
+    action: Id = ""
 
 
 class PersonView(Message, frozen=True, tag="cbdi.world.PersonView/1"):
     """One person in a snapshot."""
 
-    name: str
+    name: Symbol
     cell: Cell
     pose: Pose
 
@@ -136,19 +150,19 @@ class PersonView(Message, frozen=True, tag="cbdi.world.PersonView/1"):
 class BinView(Message, frozen=True, tag="cbdi.world.BinView/1"):
     """One bin."""
 
-    name: str
+    name: Symbol
     cell: Cell
 
 
 class WorldSnapshot(Message, frozen=True, tag="cbdi.world.WorldSnapshot/1"):
     """Everything that moves, published every epoch for viewers and recorders."""
 
-    epoch: int
-    time: float
-    agents: list[AgentView]
-    people: list[PersonView]
-    litter: list[LitterView]
-    recycled: list[str]
+    epoch: Count
+    time: NonNegative
+    agents: Many[AgentView]
+    people: Many[PersonView]
+    litter: Many[LitterView]
+    recycled: Many[Symbol]
 
 
 class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"):
@@ -158,24 +172,23 @@ class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"
 class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     """The static part of the world: size, walls, bins, agents and their sensing depth."""
 
-    map_name: str
-    width: int
-    height: int
-    walls: list[Cell]
-    bins: list[BinView]
-    agents: list[str]
-    detection_depth: dict[str, int]
-    capacity: int
-    epoch_duration: float
-    durations: dict[str, float]
-    known_litter: list[LitterView] = []  # litter agents know of at the start
+    map_name: Text
+    width: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
+    height: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
+    walls: Many[Cell]
+    bins: Many[BinView]
+    agents: Many[AgentName]
+    detection_depth: Annotated[dict[AgentName, Count], msgspec.Meta(max_length=10_000)]
+    capacity: Count
+    epoch_duration: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
+    durations: Annotated[dict[Symbol, NonNegative], msgspec.Meta(max_length=1000)]
+    known_litter: Many[LitterView] = []  # litter agents know of at the start
     # The members (`agent/component`) the start barrier, and in lockstep every epoch,
     # waits for.
-    members: list[str] = []
+    members: Many[Symbol] = []
     lockstep: bool = False
 
 
-Name = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
 ACK_STAGES = ("ready", "beliefs", "done")
 
 
@@ -190,40 +203,40 @@ class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
     waits for the rest, so nothing of epoch k arrives after the next epoch starts.
     """
 
-    agent: Name
-    epoch: Annotated[int, msgspec.Meta(ge=-1)]
-    component: Name = "executor"
+    agent: AgentName
+    epoch: Epoch
+    component: AgentName = "executor"
     stage: Literal["ready", "beliefs", "done"] = "done"
-    sent: Annotated[dict[str, Annotated[int, msgspec.Meta(ge=0)]], msgspec.Meta(max_length=64)] = {}
+    sent: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=64)] = {}
 
 
 class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
     """Counters for one agent, the paper's metric (moves) first."""
 
-    agent: str
-    moves: int = 0
-    pickups: int = 0
-    recycled: int = 0
-    blocked: int = 0
-    failed: int = 0
-    rejected: int = 0
-    contacts: int = 0
+    agent: AgentName
+    moves: Count = 0
+    pickups: Count = 0
+    recycled: Count = 0
+    blocked: Count = 0
+    failed: Count = 0
+    rejected: Count = 0
+    contacts: Count = 0
 
 
 class StatsRequest(Message, frozen=True, tag="cbdi.world.StatsRequest/1"):
     """Ask for statistics, of one agent or (agent empty) of all."""
 
-    agent: str = ""
+    agent: Id = ""
 
 
 class WorldStats(Message, frozen=True, tag="cbdi.world.WorldStats/1"):
     """Per-agent counters and the litter totals at `epoch`."""
 
-    epoch: int
-    time: float
-    agents: list[AgentStats]
-    litter_on_ground: int
-    litter_held: int
-    litter_recycled: int
-    litter_spawned: int
+    epoch: Count
+    time: NonNegative
+    agents: Many[AgentStats]
+    litter_on_ground: Count
+    litter_held: Count
+    litter_recycled: Count
+    litter_spawned: Count
     done: bool

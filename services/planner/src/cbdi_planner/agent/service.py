@@ -25,8 +25,7 @@ from cbdi import keys
 from cbdi.agentfile import RawAgentFile
 from cbdi.beliefs import BeliefSet, from_wire
 from cbdi.bus import publish, sequenced_inputs
-from cbdi.bus.typed import Stamped
-from cbdi.errors import CbdiError
+from cbdi.bus.typed import Stamped, dropping
 from cbdi.lockstep import Lockstep, Need, announce_ready, default_sender, send_ack
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
@@ -151,14 +150,11 @@ class _Epochs(ABC):
     async def checked_handle(self, key: str, msg: Message) -> None:
         """Handle one input; bad input is reported, never fatal."""
         agent = getattr(msg, "agent", None)
-        try:
-            if agent != self.agent:
-                raise UnknownAgentError(str(agent), self.agent, type(msg).__name__)
+        if agent != self.agent:
+            self.ctx.bad_input(key, UnknownAgentError(str(agent), self.agent, type(msg).__name__))
+            return
+        with dropping(self.ctx, key, msg):
             await self.handle_input(key, msg)
-        except CbdiError as exc:
-            self.ctx.bad_input(key, exc)
-        except Exception as exc:
-            self.ctx.crashed(key, exc)
 
     @abstractmethod
     async def handle_input(self, key: str, msg: Message) -> None:

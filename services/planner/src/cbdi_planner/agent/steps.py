@@ -9,13 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from cbdi.wire.agent import Check, PlanStep
+from cbdi.wire.agent import Check, CheckOp, PlanStep
 from cbdi_planner.pddl.ast import ALL, START, Action, Compare, Cond, Domain, FHead, Lit, Num
 from cbdi_planner.plan import Plan
 
 __all__ = ["plan_steps"]
 
-_OPS = {"<": "LT", "<=": "LE", "=": "EQ", ">=": "GE", ">": "GT"}
+_OPS: dict[str, CheckOp] = {"<": "LT", "<=": "LE", "=": "EQ", ">=": "GE", ">": "GT"}
 
 
 def _ground(args: Iterable[str], binding: dict[str, str]) -> list[str]:

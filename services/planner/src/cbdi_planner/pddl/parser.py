@@ -255,10 +255,7 @@ def _init_item(r: Reader, problem: Problem, lst: SList) -> None:
     op = r.head(lst)
     items = lst.items
     if op == "at" and len(items) == 3 and isinstance(items[2], SList) and isinstance(items[1], Sym):
-        try:
-            when = float(items[1].text)
-        except ValueError:
-            raise r.syntax(items[1], "bad time", "a number") from None
+        when = r.number(items[1], "a time (a number)")
         inner = items[2]
         positive = r.head(inner) != "not"
         if not positive:
@@ -268,11 +265,7 @@ def _init_item(r: Reader, problem: Problem, lst: SList) -> None:
         problem.timed_literals.append((when, TimedLiteral(Atom(name, args), positive, INST)))
     elif op == "=" and len(items) == 3 and isinstance(items[1], SList):
         name, args = r.call(items[1], r.functions, {}, "function")
-        value = items[2]
-        try:
-            problem.init_numeric[FHead(name, args)] = float(r.as_sym(value, "a number"))
-        except ValueError:
-            raise r.syntax(value, "bad numeric value", "a number") from None
+        problem.init_numeric[FHead(name, args)] = r.number(items[2], "a numeric value")
     elif op == "not":
         return  # closed world: an explicit negative initial fact changes nothing
     else:

@@ -6,6 +6,8 @@ can name the exact line and column of the offending symbol.
 
 from __future__ import annotations
 
+import math
+
 from cbdi_planner.errors import PddlSyntaxError, SemanticError, UnsupportedFeature
 from cbdi_planner.pddl.ast import BinOp, DurationVar, Expr, FHead, Num, Param
 from cbdi_planner.pddl.sexpr import SList, SNode, Sym
@@ -71,6 +73,17 @@ class Reader:
             raise self.syntax(
                 at, f"{self.head(node) or 'list'} needs {count - 1} argument(s)", expected
             )
+
+    def number(self, node: SNode, expected: str = "a number") -> float:
+        """Return `node` as a finite number; NaN, infinities and overflows are refused."""
+        text = self.as_sym(node, expected)
+        try:
+            value = float(text)
+        except ValueError:
+            raise self.syntax(node, f"found {text!r}", expected) from None
+        if not math.isfinite(value):
+            raise self.syntax(node, f"{text!r} is not a finite number", expected)
+        return value
 
     # -- typed lists ----------------------------------------------------------
     def typed_list(
@@ -158,14 +171,9 @@ class Reader:
                 return DurationVar()
             if node.text == "#t":
                 raise self.unsupported(node, "continuous effects (#t) are not supported")
-            try:
-                return Num(float(node.text))
-            except ValueError:
-                if node.text in self.functions and not self.functions[node.text]:
-                    return FHead(node.text, ())
-                raise self.syntax(
-                    node, f"found {node.text!r}", "a number or an expression"
-                ) from None
+            if node.text in self.functions and not self.functions[node.text]:
+                return FHead(node.text, ())
+            return Num(self.number(node, "a number or an expression"))
         op = self.head(node)
         if op in _ARITH and len(node.items) >= 2:
             operands = [self.expr(item, scope) for item in node.items[1:]]

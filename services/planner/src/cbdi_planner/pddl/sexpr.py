@@ -11,8 +11,11 @@ from dataclasses import dataclass
 
 from cbdi_planner.errors import PddlSyntaxError
 
-__all__ = ["SList", "SNode", "Sym", "read_sexpr"]
+__all__ = ["MAX_DEPTH", "SList", "SNode", "Sym", "read_sexpr"]
 
+# Deeper lists are refused where they open: every later stage walks formulas
+# recursively, and no real domain or problem comes near this.
+MAX_DEPTH = 64
 _TOKEN = re.compile(r"\s+|;[^\n]*|\(|\)|[^\s();]+")
 
 
@@ -40,7 +43,8 @@ SNode = Sym | SList
 
 
 def read_sexpr(text: str, file: str = "<string>") -> SList:
-    """Read exactly one top-level list from `text`; reject unbalanced or trailing input."""
+    """Read exactly one top-level list from `text`; reject unbalanced or trailing input,
+    and lists nested deeper than MAX_DEPTH."""
     stack: list[tuple[list[SNode], int, int]] = []
     result: SList | None = None
     line, line_start = 1, 0
@@ -62,6 +66,14 @@ def read_sexpr(text: str, file: str = "<string>") -> SList:
                 expected="end of file",
             )
         if token == "(":
+            if len(stack) >= MAX_DEPTH:
+                raise PddlSyntaxError(
+                    f"lists nested more than {MAX_DEPTH} deep",
+                    file=file,
+                    line=line,
+                    column=column,
+                    expected="a shallower expression",
+                )
             stack.append(([], line, column))
         elif token == ")":
             if not stack:

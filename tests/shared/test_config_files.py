@@ -1,0 +1,172 @@
+"""Map, scenario and agent files: every mistake names the file and the field (issue 15).
+
+Not UTF-8, a wrong type, a value out of range, a rule over a predicate the domain
+lacks: each is a `CbdiError` saying where, never a traceback; a fuzz of the shipped
+files gives nothing else, and `cbdi up` exits 2 for a bad scenario.
+"""
+
+from __future__ import annotations
+
+import random
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from cbdi.errors import CbdiError
+from cbdi.launcher.scenario import load_scenario
+from cbdi_scheduler.agentfile import load_agent
+from cbdi_world.maps import load_map
+
+REPO = Path(__file__).resolve().parents[2]
+MAP = REPO / "domains/recycling/maps/paper-7x7.toml"
+SCENARIO = REPO / "domains/recycling/scenarios/paper-7x7.toml"
+AGENT = REPO / "domains/recycling/agents/recycler.toml"
+DOMAIN = REPO / "domains/recycling/pddl/domain.pddl"
+CBDI = Path(sys.executable).parent / "cbdi"
+
+
+def scenario(tmp_path: Path, run: str) -> Path:
+    path = tmp_path / "s.toml"
+    path.write_text(f'name = "s"\nmap = "{MAP}"\n[run]\n{run}\n[[agents]]\nname = "robot1"\n')
+    return path
+
+
+def agent(tmp_path: Path, old: str, new: str) -> Path:
+    text = AGENT.read_text().replace('domain = "../pddl/domain.pddl"', f'domain = "{DOMAIN}"')
+    assert old in text
+    path = tmp_path / "agent.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+LOADERS: dict[str, tuple[Path, Callable[[Path], object]]] = {
+    "map": (MAP, load_map),
+    "scenario": (SCENARIO, load_scenario),
+    "agent": (AGENT, lambda p: load_agent(p, "robot1")),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(LOADERS))
+def test_a_file_that_is_not_utf8_is_named(kind: str, tmp_path: Path) -> None:
+    original, load = LOADERS[kind]
+    path = tmp_path / original.name
+    path.write_bytes(b'name = "\xff\xfe"\n' + original.read_bytes())
+    with pytest.raises(CbdiError, match=r"not UTF-8 text \(byte 8\)") as err:
+        load(path)
+    assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("run", "field"),
+    [
+        ("until = []", "run.until"),
+        ("until = -1", "run.until"),
+        ('until = "nan"', "run.until"),
+        ("max_time = -5", "run.max_time"),
+        ("max_time = inf", "run.max_time"),
+        ("speed = nan", "run.speed"),
+        ("seed = true", "run.seed"),
+        ("seed = -3", "run.seed"),
+        ("spawn = 2.0", "run.spawn"),
+        ("planning_speed = -inf", "run.planning_speed"),
+        ("lockstep = 1", "run.lockstep"),
+    ],
+)
+def test_scenario_values_out_of_range_name_the_field(tmp_path: Path, run: str, field: str) -> None:
+    path = scenario(tmp_path, run)
+    with pytest.raises(CbdiError, match=f"{path}: {field}: "):
+        load_scenario(path)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("plan_size_limit = 8", "plan_size_limit = -1", "planning.plan_size_limit"),
+        ("round_interval = 0.1", "round_interval = -inf", "planning.round_interval"),
+        ("round_interval = 0.1", "round_interval = nan", "planning.round_interval"),
+        (
+            "expansions_per_round = 200",
+            "expansions_per_round = -1",
+            "planning.expansions_per_round",
+        ),
+        ("priority = 0.8", "priority = 8", r"rules\[0\].then\[0\].boost.priority"),
+        ("deadline = 64", "deadline = nan", r"rules\[0\].then\[0\].boost.deadline"),
+        ("plan_retries = 3", "plan_retries = -2", "scheduler.plan_retries"),
+        ('"(holding {self} {x})"', '"(holdin {self} {x})"', r"rules\[1\].when\[0\]\[2\]"),
+        ('"(recycled {x})"', '"(recycle {x})"', r"rules\[0\].then\[0\].boost.goal\[0\]"),
+        ('"(in {self} {x})"', '"(in {x})"', r"rules\[2\].then\[1\].add_desire.goal\[0\]"),
+        ('"(map_loaded)",\n', '"(map_loaded)", "(should_patrol c_1_1 c_2_2)",\n', "beliefs"),
+        ('"(= (loaded_amount {self}) 0)"', '"(= (loaded_amount {self}) nan)"', r"beliefs\[2\]"),
+    ],
+)
+def test_agent_file_mistakes_name_the_field(tmp_path: Path, old: str, new: str, field: str) -> None:
+    path = agent(tmp_path, old, new)
+    if "should_patrol c_1_1" in new:  # private beliefs take any arguments, but not goals
+        load_agent(path, "robot1")
+        return
+    with pytest.raises(CbdiError, match=f"{path}: {field}: "):
+        load_agent(path, "robot1")
+
+
+def test_a_goal_over_a_private_predicate_is_refused(tmp_path: Path) -> None:
+    path = agent(tmp_path, '"(recycled {x})"', '"(should_patrol {x})"')
+    with pytest.raises(CbdiError, match=r"'should_patrol' is not declared by the domain$"):
+        load_agent(path, "robot1")
+
+
+def test_map_numbers_must_be_finite(tmp_path: Path) -> None:
+    path = tmp_path / "m.toml"
+    text = MAP.read_text()
+    assert "epoch_duration = 1.0" in text
+    path.write_text(text.replace("epoch_duration = 1.0", "epoch_duration = inf"))
+    with pytest.raises(CbdiError, match="epoch_duration: expected a finite number > 0"):
+        load_map(path)
+
+
+def damaged(data: bytes, rng: random.Random) -> bytes:
+    i = rng.randrange(len(data))
+    kind = rng.randrange(4)
+    if kind == 0:
+        return data[:i]
+    if kind == 1:
+        return data[:i] + bytes([rng.randrange(256)]) + data[i + 1 :]
+    if kind == 2:
+        return data[:i] + data[i + rng.randint(1, 30) :]
+    j = rng.randrange(len(data))
+    return data[:i] + data[j : j + rng.randint(1, 30)] + data[i:]
+
+
+@pytest.mark.parametrize("kind", sorted(LOADERS))
+def test_damaged_shipped_files_load_or_give_a_named_error(kind: str, tmp_path: Path) -> None:
+    original, load = LOADERS[kind]
+    data = original.read_bytes()
+    if kind == "agent":
+        data = data.replace(b'"../pddl/domain.pddl"', f'"{DOMAIN}"'.encode())
+    if kind == "scenario":
+        data = data.replace(b'"../maps/', f'"{MAP.parent}/'.encode())
+    rng = random.Random(f"config:{kind}")
+    path = tmp_path / original.name
+    errors = 0
+    for _ in range(150):
+        path.write_bytes(damaged(data, rng))
+        try:
+            load(path)
+        except CbdiError as exc:
+            errors += 1
+            assert str(path) in str(exc), exc
+    assert errors > 30
+
+
+def test_cbdi_up_exits_2_for_a_bad_scenario(tmp_path: Path) -> None:
+    for run in ("until = []", "max_time = -5"):
+        path = scenario(tmp_path, run)
+        done = subprocess.run([str(CBDI), "up", str(path)], capture_output=True, text=True)
+        assert done.returncode == 2, done.stderr
+        assert "Traceback" not in done.stderr and str(path) in done.stderr
+    done = subprocess.run(
+        [str(CBDI), "up", "paper-7x7", "--until", "-1"], capture_output=True, text=True
+    )
+    assert done.returncode == 2 and "--until" in done.stderr
