@@ -1,4 +1,5 @@
-"""Two BDI robots in containers: the image from a fresh clone, the paper run to its end.
+"""Two BDI robots in containers: the image from a fresh clone, the paper run to its end,
+in one compose project and split over two with their routers joined.
 
 Podman runs the containers (no Docker engine here; `make test` installs it), driven by
 Compose v1 (`docker-compose`) through `podman system service`, as docs/containers.md
@@ -11,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
 import subprocess
 import sys
 import time
@@ -54,63 +56,72 @@ def _run(
     )
 
 
-@pytest.fixture
-def podman_socket(tmp_path: Path) -> Iterator[str]:
+@pytest.fixture(scope="module")
+def podman_socket(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A Docker API on a socket of ours, served by Podman, for docker-compose."""
-    socket = tmp_path / "podman.sock"
+    sock = tmp_path_factory.mktemp("podman") / "podman.sock"
     assert PODMAN is not None
     service = subprocess.Popen(
-        [PODMAN, "system", "service", "--time", "0", f"unix://{socket}"],
+        [PODMAN, "system", "service", "--time", "0", f"unix://{sock}"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
     try:
         deadline = time.monotonic() + 30
-        while not socket.exists() and time.monotonic() < deadline:
+        while not sock.exists() and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert socket.exists(), "podman system service did not open its socket"
-        yield f"unix://{socket}"
+        assert sock.exists(), "podman system service did not open its socket"
+        yield f"unix://{sock}"
     finally:
         service.terminate()
         service.wait(timeout=30)
 
 
-def test_two_bdi_robots_in_containers_recycle_everything(
-    tmp_path: Path, podman_socket: str
-) -> None:
-    clone = tmp_path / "clone"
-    cloned = _run(["git", "clone", "-q", str(REPO), str(clone)], tmp_path, 120)
+@pytest.fixture(scope="module")
+def image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """The cbdi image, built from a fresh clone with tools/image.sh (Podman)."""
+    root = tmp_path_factory.mktemp("clone")
+    clone = root / "cbdi"
+    cloned = _run(["git", "clone", "-q", str(REPO), str(clone)], root, 120)
     assert cloned.returncode == 0, cloned.stderr
-    image = f"localhost/cbdi-test:{os.getpid()}"
-    project = f"cbdi-test-{os.getpid()}"
-    env = {"CBDI_ENGINE": "podman", "CBDI_IMAGE": image, "DOCKER_HOST": podman_socket}
+    tag = f"localhost/cbdi-test:{os.getpid()}"
     started = time.monotonic()
-    built = _run(["sh", "tools/image.sh"], clone, 900, **env)
+    built = _run(["sh", "tools/image.sh"], clone, 900, CBDI_ENGINE="podman", CBDI_IMAGE=tag)
     assert built.returncode == 0, built.stderr[-3000:]
-    build_s = time.monotonic() - started
-    compose_file = tmp_path / "run.yml"
-    compose = [COMPOSE or "docker-compose", "-f", str(compose_file), "-p", project]
+    print(f"image built in {time.monotonic() - started:.0f} s")
     try:
-        # The generator inside the image: its paths are the image's.
-        generated = _run(
-            [PODMAN or "podman", "run", "--rm", "--ulimit", "nofile=4096:4096",
-             "--ulimit", "nproc=4096:4096", image,
-             "cbdi", "compose", "paper-7x7", "--agents", "2", "--runs", str(tmp_path / "runs"),
-             "--timeout", "600"],
-            clone, 120,
-        )  # fmt: skip
-        assert generated.returncode == 0, generated.stderr
-        compose_file.write_text(generated.stdout)
-        (tmp_path / "runs").mkdir()
-        up = _run([*compose, "up", "--exit-code-from", "wait"], tmp_path, 900, **env)
-        run_s = time.monotonic() - started - build_s
-        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+        yield tag
     finally:
-        _run([*compose, "down"], tmp_path, 300, **env)
-        _run([PODMAN or "podman", "rmi", image], tmp_path, 120)
-    print(f"image built in {build_s:.0f} s, run in {run_s:.0f} s")
-    recording = tmp_path / "runs" / "paper-7x7.mcap"
-    inspected = _run([str(BIN / "cbdi"), "inspect", "--json", str(recording)], tmp_path, 120)
+        _run([PODMAN or "podman", "rmi", tag], root, 120)
+
+
+def _generate(image: str, where: Path, *args: str) -> Path:
+    """Write the compose file the image's own `cbdi compose` makes (its paths are the
+    image's), recording into `where`/runs."""
+    generated = _run(
+        [PODMAN or "podman", "run", "--rm", "--ulimit", "nofile=4096:4096",
+         "--ulimit", "nproc=4096:4096", image, "cbdi", "compose", "paper-7x7",
+         "--agents", "2", "--image", image, "--runs", str(where / "runs"), "--timeout", "600",
+         *args],
+        where, 120,
+    )  # fmt: skip
+    assert generated.returncode == 0, generated.stderr
+    (where / "runs").mkdir(exist_ok=True)
+    path = where / f"run{len(list(where.glob('run*.yml')))}.yml"
+    path.write_text(generated.stdout)
+    return path
+
+
+def _compose(path: Path, project: str, api: str, *args: str) -> subprocess.CompletedProcess[str]:
+    argv = [COMPOSE or "docker-compose", "-f", str(path), "-p", project, *args]
+    return _run(argv, path.parent, 900, DOCKER_HOST=api)
+
+
+def _check_recording(recording: Path) -> None:
+    """The run ended done, both robots recycled something, the file is a valid MCAP."""
+    inspected = _run(
+        [str(BIN / "cbdi"), "inspect", "--json", str(recording)], recording.parent, 120
+    )
     assert inspected.returncode == 0, inspected.stderr
     report = json.loads(inspected.stdout)
     assert report["result"] == "done"
@@ -118,5 +129,47 @@ def test_two_bdi_robots_in_containers_recycle_everything(
     assert set(recycled) == {"robot1", "robot2"} and all(n > 0 for n in recycled.values())
     rerun = shutil.which("rerun", path=str(BIN)) or shutil.which("rerun")
     assert rerun, "rerun (rerun-sdk, a dev dependency) is missing"
-    checked = _run([rerun, "mcap", "check", str(recording)], tmp_path, 120)
+    checked = _run([rerun, "mcap", "check", str(recording)], recording.parent, 120)
     assert checked.returncode == 0, checked.stdout[-2000:]
+
+
+def test_two_bdi_robots_in_containers_recycle_everything(
+    tmp_path: Path, image: str, podman_socket: str
+) -> None:
+    path = _generate(image, tmp_path)
+    project = f"cbdi-test-{os.getpid()}"
+    started = time.monotonic()
+    try:
+        up = _compose(path, project, podman_socket, "up", "--exit-code-from", "wait")
+        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+    finally:
+        _compose(path, project, podman_socket, "down")
+    print(f"run in {time.monotonic() - started:.0f} s")
+    _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def test_a_run_split_over_two_projects_with_joined_routers(
+    tmp_path: Path, image: str, podman_socket: str
+) -> None:
+    first, second = _free_port(), _free_port()
+    here = _generate(image, tmp_path, "--network", "host", "--port", str(first),
+                     "--only", "world,robot1")  # fmt: skip
+    there = _generate(image, tmp_path, "--network", "host", "--port", str(second),
+                      "--join", f"tcp/127.0.0.1:{first}", "--only", "robot2")  # fmt: skip
+    a, b = f"cbdi-test-a-{os.getpid()}", f"cbdi-test-b-{os.getpid()}"
+    try:
+        started = _compose(there, b, podman_socket, "up", "-d")
+        assert started.returncode == 0, started.stderr[-2000:]
+        up = _compose(here, a, podman_socket, "up", "--exit-code-from", "wait")
+        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+    finally:
+        _compose(there, b, podman_socket, "down")
+        _compose(here, a, podman_socket, "down")
+    _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
