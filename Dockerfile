@@ -1,28 +1,36 @@
 # One image for every cbdi service; the command picks the service. The monitor's rerun
 # extra (rerun-sdk, ~770 MB) is not installed here: `cbdi view` runs on the host.
-#   docker build -t cbdi .                       (or: podman build -t cbdi .)
-#   docker build --build-arg BASE_IMAGE=localhost/debian-python:3.11 -t cbdi .
-# The base must provide Python 3.11 with pip and venv. No registry is reachable on some
-# machines: build a local base (debootstrap + `podman import`) and pass it as BASE_IMAGE.
+#   tools/image.sh            (make image: makes a local base, no registry needed)
+#   docker build -t localhost/cbdi .                       (or: podman build ...)
+#   docker build --build-arg BASE_IMAGE=localhost/cbdi-base:bookworm -t localhost/cbdi .
+# The base must provide Python 3.11 with venv (and pip through ensurepip).
 ARG BASE_IMAGE=python:3.11-slim
-FROM ${BASE_IMAGE}
 
-ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PIP_DISABLE_PIP_VERSION_CHECK=1
+# The build stage: a venv with the pinned dependencies and the cbdi packages. It alone
+# sees tools/image/build-env (the host's CA bundle and pip settings, when staged).
+FROM ${BASE_IMAGE} AS build
+# pip compiles the bytecode: services start faster (8 containers at once on 2 cores).
+ENV PIP_DISABLE_PIP_VERSION_CHECK=1 PIP_NO_CACHE_DIR=1
 WORKDIR /opt/cbdi
-
+COPY tools/image/build-env/ /tmp/build-env/
 # Dependencies first, pinned, so that code changes do not reinstall them.
 COPY requirements.lock ./
-RUN python3 -m venv /opt/venv \
- && /opt/venv/bin/pip install --no-cache-dir -r requirements.lock setuptools==80.9.0
-ENV PATH=/opt/venv/bin:$PATH
-
+RUN . /tmp/build-env/env.sh \
+ && python3 -m venv /opt/venv \
+ && /opt/venv/bin/pip install -q -r requirements.lock setuptools==80.9.0
 COPY shared ./shared
 COPY services ./services
-COPY domains ./domains
-RUN pip install --no-cache-dir --no-deps --no-build-isolation \
+RUN . /tmp/build-env/env.sh \
+ && /opt/venv/bin/pip install -q --no-deps --no-build-isolation \
       ./shared ./services/world ./services/monitor \
-      ./services/planner ./services/scheduler ./services/executor
+      ./services/planner ./services/scheduler ./services/executor \
+ && /opt/venv/bin/pip uninstall -q -y setuptools pip
 
-ENV CBDI_DOMAINS=/opt/cbdi/domains
-# Services connect to the router through CBDI_CONNECT (set in docker-compose.yml).
+FROM ${BASE_IMAGE}
+ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PATH=/opt/venv/bin:$PATH \
+    CBDI_DOMAINS=/opt/cbdi/domains
+COPY --from=build /opt/venv /opt/venv
+COPY domains /opt/cbdi/domains
+WORKDIR /opt/cbdi
+# Services connect to the router through CBDI_CONNECT (set in the compose file).
 CMD ["cbdi", "--help"]

@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner
 PYTEST_ARGS ?=
 
-.PHONY: venv demo test lint bench bench-planner bench-continual bench-table1 clean system-tools
+.PHONY: venv demo test lint bench bench-planner bench-continual bench-table1 clean system-tools image
 
 venv: $(STAMP)
 
@@ -18,8 +18,9 @@ $(STAMP): requirements.lock requirements-dev.lock $(foreach p,$(PACKAGES),$(p)/p
 	touch $(STAMP)
 
 # Debian packages the tests use, installed when missing: docker-compose (Compose v1)
-# validates docker-compose.yml offline; chromium renders the rerun web viewer.
-SYSTEM_TOOLS := docker-compose:docker-compose chromium:chromium
+# validates and runs compose files; podman runs the containers (no Docker engine needed)
+# and debootstrap makes their base image; chromium renders the rerun web viewer.
+SYSTEM_TOOLS := docker-compose:docker-compose podman:podman debootstrap:debootstrap chromium:chromium
 system-tools:
 	@missing=""; for t in $(SYSTEM_TOOLS); do \
 	  command -v $${t%%:*} >/dev/null 2>&1 || missing="$$missing $${t#*:}"; done; \
@@ -36,6 +37,11 @@ demo: venv
 	$(BIN)/cbdi up paper-7x7 --view text --quiet
 	$(BIN)/cbdi up paper-7x7 --agents 3 --view text --quiet --record runs/demo.mcap
 	$(BIN)/cbdi inspect runs/demo.mcap
+
+# The cbdi image (localhost/cbdi:latest) with Podman or Docker, on a Debian base made
+# here with debootstrap when there is none (no registry needed); see docs/containers.md.
+image:
+	sh tools/image.sh
 
 test: venv system-tools
 	$(BIN)/python -m pytest $(PYTEST_ARGS)

@@ -83,7 +83,7 @@ def launcher_world(up_argv: Sequence[str]) -> World:
     from cbdi.runtime import load_config
     from cbdi_world.service import WorldSettings, build_world
 
-    scenario = cli._scenario(cli._parser().parse_args(list(up_argv)))
+    scenario = cli.scenario_from_args(cli._parser().parse_args(list(up_argv)))
     spec = next(s for s in run._specs(scenario, "tcp/127.0.0.1:0") if s.service == "world")
     argv = list(spec.argv)
     settings = load_config(

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from cbdi.launcher import compose
+
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE = shutil.which("docker-compose")
 
@@ -28,14 +30,22 @@ def test_compose_file_is_valid() -> None:
     assert result.returncode == 0, result.stderr
 
 
-def test_compose_runs_router_world_and_a_bdi_agent_against_the_router() -> None:
+def test_compose_runs_router_world_two_bdi_agents_and_wait_against_the_router() -> None:
     result = _config(REPO / "docker-compose.yml", "--services")
     assert result.returncode == 0, result.stderr
-    services = {"router", "monitor", "world", "robot1-planner", "robot1-scheduler"}
-    assert services | {"robot1-executor"} <= set(result.stdout.split())
+    robots = {f"robot{i}-{c}" for i in (1, 2) for c in ("planner", "scheduler", "executor")}
+    assert set(result.stdout.split()) == {"router", "monitor", "world", "wait"} | robots
     full = _config(REPO / "docker-compose.yml").stdout
     assert "CBDI_CONNECT: tcp/router:7447" in full
-    assert "BASE_IMAGE" in full
+    assert "--stop-when-done" in full
+
+
+def test_the_committed_compose_file_is_what_cbdi_compose_writes(tmp_path: Path) -> None:
+    out = tmp_path / "docker-compose.yml"
+    assert compose.main(["paper-7x7", "--agents", "2", "-o", str(out)]) == 0
+    assert out.read_text() == (REPO / "docker-compose.yml").read_text(), (
+        "regenerate it: cbdi compose paper-7x7 --agents 2 -o docker-compose.yml"
+    )
 
 
 def test_the_validator_rejects_a_broken_file(tmp_path: Path) -> None:

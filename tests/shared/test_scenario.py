@@ -26,7 +26,7 @@ def scenario_file(tmp_path: Path, run: str) -> Path:
 
 def world_of(argv: list[str]) -> Chance:
     """Build the world `cbdi up ARGV` would start and return its chances."""
-    scenario = cli._scenario(cli._parser().parse_args(argv))
+    scenario = cli.scenario_from_args(cli._parser().parse_args(argv))
     world_argv = next(s.argv for s in _specs(scenario, "tcp/127.0.0.1:1") if s.service == "world")
     args = world_argv[world_argv.index("--map") :]
     return build_world(load_config(WorldSettings, args, prog="w", section="world", env={})).chance
@@ -85,7 +85,7 @@ def test_bad_flags_exit_2_naming_the_flag(flags: list[str], capsys: pytest.Captu
 
 def test_each_service_is_told_its_args_and_the_launcher_records_them() -> None:
     # What `RunLaunched` carries: the end of each argv, enough to build the service again.
-    scenario = cli._scenario(cli._parser().parse_args(["paper-7x7", "--mode", "offline"]))
+    scenario = cli.scenario_from_args(cli._parser().parse_args(["paper-7x7", "--mode", "offline"]))
     specs = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1")}
     for spec in specs.values():
         assert spec.args and spec.argv[-len(spec.args) :] == spec.args

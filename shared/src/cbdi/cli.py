@@ -15,8 +15,10 @@ __all__ = ["main"]
 Command = Callable[[Sequence[str] | None], int]
 
 _BUILTIN = {
+    "compose": ("cbdi.launcher.compose", "write a compose file running a scenario in containers"),
     "router": ("cbdi.router", "run a Zenoh router"),
     "up": ("cbdi.launcher.cli", "run a scenario: router, world and agents as processes"),
+    "wait": ("cbdi.launcher.wait", "wait for the run's end; exit with its result"),
     "view": ("cbdi.view", "show the world as text, one frame per epoch"),
 }
 

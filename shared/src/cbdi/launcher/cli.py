@@ -26,7 +26,7 @@ from cbdi.launcher.scenario import (
     load_scenario,
 )
 
-__all__ = ["main"]
+__all__ = ["main", "scenario_arguments", "scenario_from_args"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 PLANNER_COUNTS = ("plans", "replans", "forecast_repairs", "improvements", "search_rounds")
@@ -40,6 +40,13 @@ def _parser() -> argparse.ArgumentParser:
         "2 bad usage or scenario, 3 the time limit came before all litter was recycled, "
         "130 interrupted (Ctrl-C).",
     )
+    scenario_arguments(p)
+    return _run_arguments(p)
+
+
+def scenario_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the scenario and the flags that override its run settings (`cbdi up`, `cbdi
+    compose`); `scenario_from_args` reads them back."""
     p.add_argument(
         "scenario", help="scenario name (domains/recycling/scenarios/NAME.toml) or a file"
     )
@@ -82,6 +89,9 @@ def _parser() -> argparse.ArgumentParser:
         help="virtual time (lockstep): planner expansions per simulated second "
         "(default: each agent file's planning_speed)",
     )
+
+
+def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout at the end")
     p.add_argument(
         "--view",
@@ -116,7 +126,10 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _scenario(args: argparse.Namespace) -> Scenario:
+def scenario_from_args(args: argparse.Namespace) -> Scenario:
+    """Return the scenario named by `args`, its run settings overridden by their flags.
+
+    Raises `ConfigError` naming the flag of a bad value."""
     scenario = load_scenario(find_scenario(args.scenario))
     run = scenario.run
     if args.until is not None:
@@ -195,7 +208,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run `cbdi up` and return its exit code."""
     args = _parser().parse_args(list(argv) if argv is not None else None)
     try:
-        scenario = _scenario(args)
+        scenario = scenario_from_args(args)
         policy = RestartPolicy(mode=args.restart, max_restarts=args.max_restarts)
     except (ConfigError, ValueError) as exc:
         print(f"cbdi up: {exc}", file=sys.stderr)

@@ -28,14 +28,9 @@ from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish, re
 from cbdi.bus.base import Bus
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
-from cbdi.launcher.process import (
-    ManagedProcess,
-    ProcessSpec,
-    RestartPolicy,
-    argv_of,
-    console_script,
-)
+from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy, console_script
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
+from cbdi.launcher.services import plan_services
 from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
@@ -97,73 +92,15 @@ def free_port() -> int:
 def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessSpec]:
     # A fixed hash seed: no decision may hang on the order of a set of strings.
     env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0"}
-    run = scenario.run
-    world_args = ["--map", str(scenario.map_path), "--speed", str(run.speed)]
-    world_args += ["--seed", str(run.seed)]
-    if run.until == "done":
-        world_args += ["--max-time", str(run.max_time), "--stop-when-done"]
-    else:
-        world_args += ["--max-time", run.until, "--no-stop-when-done"]
-    world_args += ["--lockstep" if run.lockstep else "--no-lockstep"]
-    world_args += ["--move-step", str(run.move_step), "--det-area", str(run.det_area)]
-    world_args += ["--known-litter", str(run.known_litter), "--spawn", str(run.spawn)]
-    world_args += ["--people-phase" if run.people_phase else "--no-people-phase"]
-    world_args += ["--people-jitter", str(run.people_jitter)]
-    world_args += ["--duration-noise", str(run.duration_noise)]
-    world_args += ["--failure-probability", str(run.failure_probability)]
-    for agent in scenario.agents:
-        own = agent.detection_depth is not None and run.det_area < 0
-        depth = f":{agent.detection_depth}" if own else ""
-        world_args += ["--agent", f"{agent.name}{depth}"]
-    for agent in scenario.agents:  # every component the world waits for, from epoch -1
-        for component in AGENT_KINDS[agent.kind]:
-            world_args += ["--member", keys.member(agent.name, component)]
-    monitor = []
-    if record:
-        program = console_script("cbdi-monitor", "cbdi_monitor.cli")
-        monitor = [ProcessSpec.of("monitor", program, ("--output", record), env)]
-    router = console_script("cbdi", "cbdi.cli")
-    specs = [
-        ProcessSpec.of("router", router, ("router", "--listen", endpoint), {}),
-        *monitor,
-        ProcessSpec.of("world", console_script("cbdi-world", "cbdi_world.cli"), world_args, env),
-    ]
-    for agent in scenario.agents:
-        for component in AGENT_KINDS[agent.kind]:
-            specs.append(_agent_spec(agent.name, agent.kind, component, scenario, env))
-    return specs
-
-
-def _agent_spec(
-    name: str, kind: str, component: str, scenario: Scenario, env: dict[str, str]
-) -> ProcessSpec:
-    if kind == "bdi":
-        agent = next(a for a in scenario.agents if a.name == name)
-        script = {
-            "planner": ("cbdi-planner-agent", "cbdi_planner.agent.cli"),
-            "scheduler": ("cbdi-scheduler", "cbdi_scheduler.cli"),
-            "executor": ("cbdi-executor", "cbdi_executor.cli"),
-        }[component]
-        args = argv_of("--agent", name)
-        if component != "executor":
-            args = argv_of(args, "--agent-file", str(agent.agent_file))
-        if component == "planner" and scenario.run.mode:
-            args = argv_of(args, "--planning", scenario.run.mode)
-        if component == "planner" and scenario.run.planning_speed > 0:
-            args = argv_of(args, "--planning-speed", str(scenario.run.planning_speed))
-        return ProcessSpec.of(keys.service_id(component, name), console_script(*script), args, env)
-    if kind == "scripted":
-        args = argv_of(
-            "--agent",
-            name,
-            "--map",
-            str(scenario.map_path),
-            "--known-litter",
-            str(scenario.run.known_litter),
+    return [
+        ProcessSpec.of(
+            p.service,
+            console_script(p.script, p.module),
+            p.args,
+            {} if p.service == "router" else env,
         )
-        program = console_script("cbdi-scripted-agent", "cbdi_world.scripted.cli")
-        return ProcessSpec.of(keys.service_id(component, name), program, args, env)
-    raise CbdiError(f"agent kind {kind!r} has no services")
+        for p in plan_services(scenario, endpoint, record)
+    ]
 
 
 class _Liveliness:

@@ -1,0 +1,107 @@
+"""Which services a scenario runs, with which arguments: one list for every way of running.
+
+`cbdi up` turns it into supervised processes (`run._specs`), `cbdi compose` into compose
+services. So both start the same world, with the same `--member` for every component of
+every agent (the start barrier), and the same agent services.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from cbdi import keys
+from cbdi.errors import CbdiError
+from cbdi.launcher.scenario import AGENT_KINDS, AgentEntry, Scenario
+
+__all__ = ["ServicePlan", "agent_of", "plan_services"]
+
+# A path argument as the service will see it (the host's path, or one in a container).
+PathOf = Callable[[Path], str]
+
+_BDI_SCRIPTS = {
+    "planner": ("cbdi-planner-agent", "cbdi_planner.agent.cli"),
+    "scheduler": ("cbdi-scheduler", "cbdi_scheduler.cli"),
+    "executor": ("cbdi-executor", "cbdi_executor.cli"),
+}
+
+
+@dataclass(frozen=True)
+class ServicePlan:
+    """One service of a run: its id (`world`, `robot1/planner`), console script and args."""
+
+    service: str
+    script: str
+    module: str  # run as `python -m module` when the script is not installed
+    args: tuple[str, ...]
+
+
+def agent_of(service: str) -> str:
+    """Return the agent a service id belongs to ('' for router, monitor and world)."""
+    return service.split("/", 1)[0] if "/" in service else ""
+
+
+def plan_services(
+    scenario: Scenario, listen: str, record: str = "", path_of: PathOf = str
+) -> list[ServicePlan]:
+    """Return the run's services in start order: router, monitor (when `record`), world,
+    then each agent's components. The router listens on `listen`."""
+    plans = [ServicePlan("router", "cbdi", "cbdi.cli", ("router", "--listen", listen))]
+    if record:
+        monitor = ServicePlan("monitor", "cbdi-monitor", "cbdi_monitor.cli", ("--output", record))
+        plans.append(monitor)
+    world = ServicePlan("world", "cbdi-world", "cbdi_world.cli", world_args(scenario, path_of))
+    plans.append(world)
+    for agent in scenario.agents:
+        for component in AGENT_KINDS[agent.kind]:
+            plans.append(_agent_plan(agent, component, scenario, path_of))
+    return plans
+
+
+def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
+    """Return the world's arguments: the map, the run settings, agents and members."""
+    run = scenario.run
+    args = ["--map", path_of(scenario.map_path), "--speed", str(run.speed)]
+    args += ["--seed", str(run.seed)]
+    if run.until == "done":
+        args += ["--max-time", str(run.max_time), "--stop-when-done"]
+    else:
+        args += ["--max-time", run.until, "--no-stop-when-done"]
+    args += ["--lockstep" if run.lockstep else "--no-lockstep"]
+    args += ["--move-step", str(run.move_step), "--det-area", str(run.det_area)]
+    args += ["--known-litter", str(run.known_litter), "--spawn", str(run.spawn)]
+    args += ["--people-phase" if run.people_phase else "--no-people-phase"]
+    args += ["--people-jitter", str(run.people_jitter)]
+    args += ["--duration-noise", str(run.duration_noise)]
+    args += ["--failure-probability", str(run.failure_probability)]
+    for agent in scenario.agents:
+        own = agent.detection_depth is not None and run.det_area < 0
+        depth = f":{agent.detection_depth}" if own else ""
+        args += ["--agent", f"{agent.name}{depth}"]
+    for agent in scenario.agents:  # every component the world waits for, from epoch -1
+        for component in AGENT_KINDS[agent.kind]:
+            args += ["--member", keys.member(agent.name, component)]
+    return tuple(args)
+
+
+def _agent_plan(
+    agent: AgentEntry, component: str, scenario: Scenario, path_of: PathOf
+) -> ServicePlan:
+    service = keys.service_id(component, agent.name)
+    run = scenario.run
+    if agent.kind == "bdi":
+        args = ["--agent", agent.name]
+        if component != "executor":
+            assert agent.agent_file is not None  # load_scenario requires it of a bdi agent
+            args += ["--agent-file", path_of(agent.agent_file)]
+        if component == "planner" and run.mode:
+            args += ["--planning", run.mode]
+        if component == "planner" and run.planning_speed > 0:
+            args += ["--planning-speed", str(run.planning_speed)]
+        return ServicePlan(service, *_BDI_SCRIPTS[component], tuple(args))
+    if agent.kind == "scripted":
+        args = ["--agent", agent.name, "--map", path_of(scenario.map_path)]
+        args += ["--known-litter", str(run.known_litter)]
+        return ServicePlan(service, "cbdi-scripted-agent", "cbdi_world.scripted.cli", tuple(args))
+    raise CbdiError(f"agent kind {agent.kind!r} has no services")

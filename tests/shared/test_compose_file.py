@@ -1,0 +1,106 @@
+"""`cbdi compose`: the compose services are `cbdi up`'s, with the same arguments."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from cbdi.errors import ConfigError
+from cbdi.launcher import compose
+from cbdi.launcher.compose import ComposeOptions, compose_file
+from cbdi.launcher.run import _specs
+from cbdi.launcher.scenario import find_scenario, load_scenario
+from cbdi.launcher.wait import exit_code
+
+REPO = Path(__file__).resolve().parents[2]
+DOMAINS = str(REPO / "domains")
+
+
+def _scenario(agents: int = 2):  # type: ignore[no-untyped-def]
+    return load_scenario(find_scenario("paper-7x7")).with_agents(agents)
+
+
+def _commands(text: str) -> dict[str, list[str]]:
+    """Each service's command, read back from the generated YAML (flow lists are JSON)."""
+    import json
+
+    out: dict[str, list[str]] = {}
+    service = ""
+    for line in text.splitlines():
+        if line.startswith("  ") and not line.startswith("   ") and line.endswith(":"):
+            service = line.strip()[:-1]
+        elif line.strip().startswith("command: "):
+            out[service] = json.loads(line.strip()[len("command: ") :])
+    return out
+
+
+def test_every_service_gets_the_arguments_cbdi_up_gives_it() -> None:
+    scenario = _scenario()
+    commands = _commands(compose_file(scenario, ComposeOptions()))
+    for spec in _specs(scenario, "tcp/127.0.0.1:1", "/runs/paper-7x7.mcap"):
+        if spec.service == "router":
+            continue
+        args = [a.replace(DOMAINS, "/opt/cbdi/domains") for a in spec.args]
+        command = commands[spec.service.replace("/", "-")]
+        assert command[1 : 1 + len(args)] == args, spec.service
+    world = commands["world"]
+    members = [world[i + 1] for i, a in enumerate(world) if a == "--member"]
+    assert len(members) == 6 and "robot2/planner" in members
+    assert "--stop-when-done" in world and "--wait-agents" in world
+    assert commands["wait"][:4] == ["cbdi", "wait", "--until", "done"]
+
+
+def test_a_run_splits_over_two_projects_with_joined_routers() -> None:
+    scenario = _scenario()
+    here = ComposeOptions(network="host", port=17447, only=("world", "robot1"))
+    there = ComposeOptions(
+        network="host", port=17448, only=("robot2",), join=("tcp/127.0.0.1:17447",)
+    )
+    first = _commands(compose_file(scenario, here))
+    second = _commands(compose_file(scenario, there))
+    assert set(first) == {"router", "monitor", "world", "wait"} | {
+        f"robot1-{c}" for c in ("planner", "scheduler", "executor")
+    }
+    assert set(second) == {"router"} | {f"robot2-{c}" for c in ("planner", "scheduler", "executor")}
+    assert second["router"][-2:] == ["--connect", "tcp/127.0.0.1:17447"]
+    assert "tcp/127.0.0.1:17448" in second["router"]
+    assert "CBDI_CONNECT: tcp/127.0.0.1:17448" in compose_file(scenario, there)
+
+
+def test_unknown_parts_and_files_outside_domains_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(ConfigError, match="--only"):
+        compose_file(_scenario(), ComposeOptions(only=("robot9",)))
+    scenario_file = tmp_path / "mine.toml"
+    text = (REPO / "domains/recycling/scenarios/paper-7x7.toml").read_text()
+    map_file = REPO / "domains/recycling/maps/paper-7x7.toml"
+    (tmp_path / "map.toml").write_text(map_file.read_text())
+    agents = REPO / "domains/recycling/agents"
+    text = text.replace('"../maps/paper-7x7.toml"', '"map.toml"')
+    text = text.replace('"../agents', f'"{agents}')
+    scenario_file.write_text(text)
+    assert compose.main([str(scenario_file), "-o", str(tmp_path / "x.yml")]) == 2
+    assert "not under domains/" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not shutil.which("docker-compose"), reason="docker-compose is missing")
+def test_compose_accepts_the_generated_file(tmp_path: Path) -> None:
+    path = tmp_path / "run.yml"
+    path.write_text(compose_file(_scenario(3), ComposeOptions(publish=True, timeout=60)))
+    result = subprocess.run(
+        ["docker-compose", "-f", str(path), "config", "-q"], capture_output=True, text=True
+    )
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize(
+    ("reason", "until", "code"),
+    [("done", "done", 0), ("time_limit", "done", 3), ("time_limit", "time_limit", 0),
+     ("interrupted", "done", 1)],
+)  # fmt: skip
+def test_wait_exits_with_the_runs_result(reason: str, until: str, code: int) -> None:
+    assert exit_code(reason, until) == code

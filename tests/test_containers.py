@@ -1,0 +1,175 @@
+"""Two BDI robots in containers: the image from a fresh clone, the paper run to its end,
+in one compose project and split over two with their routers joined.
+
+Podman runs the containers (no Docker engine here; `make test` installs it), driven by
+Compose v1 (`docker-compose`) through `podman system service`, as docs/containers.md
+says. The base image is cached (Podman's store and ~/.cache/cbdi), so after the first
+run (about 3 min, debootstrap) this test takes well under a minute.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PODMAN = shutil.which("podman")
+COMPOSE = shutil.which("docker-compose")
+BIN = Path(sys.executable).parent
+
+
+def _podman_runs() -> str:
+    """Return why containers cannot run here ('' when they can)."""
+    if not PODMAN:
+        return "podman is not installed and `make system-tools` could not install it"
+    if not COMPOSE:
+        return "docker-compose is not installed and `make system-tools` could not install it"
+    info = subprocess.run([PODMAN, "info"], capture_output=True, text=True, timeout=120)
+    if info.returncode != 0:
+        return f"podman cannot run here: {info.stderr.strip()[-300:]}"
+    return ""
+
+
+WHY_NOT = _podman_runs()
+pytestmark = pytest.mark.skipif(bool(WHY_NOT), reason=WHY_NOT)
+
+
+def _run(
+    argv: list[str], cwd: Path, timeout: float, **env: str
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        argv,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, **env},
+    )
+
+
+@pytest.fixture(scope="module")
+def podman_socket(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A Docker API on a socket of ours, served by Podman, for docker-compose."""
+    sock = tmp_path_factory.mktemp("podman") / "podman.sock"
+    assert PODMAN is not None
+    service = subprocess.Popen(
+        [PODMAN, "system", "service", "--time", "0", f"unix://{sock}"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 30
+        while not sock.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert sock.exists(), "podman system service did not open its socket"
+        yield f"unix://{sock}"
+    finally:
+        service.terminate()
+        service.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """The cbdi image, built from a fresh clone with tools/image.sh (Podman)."""
+    root = tmp_path_factory.mktemp("clone")
+    clone = root / "cbdi"
+    cloned = _run(["git", "clone", "-q", str(REPO), str(clone)], root, 120)
+    assert cloned.returncode == 0, cloned.stderr
+    tag = f"localhost/cbdi-test:{os.getpid()}"
+    started = time.monotonic()
+    built = _run(["sh", "tools/image.sh"], clone, 900, CBDI_ENGINE="podman", CBDI_IMAGE=tag)
+    assert built.returncode == 0, built.stderr[-3000:]
+    print(f"image built in {time.monotonic() - started:.0f} s")
+    try:
+        yield tag
+    finally:
+        _run([PODMAN or "podman", "rmi", tag], root, 120)
+
+
+def _generate(image: str, where: Path, *args: str) -> Path:
+    """Write the compose file the image's own `cbdi compose` makes (its paths are the
+    image's), recording into `where`/runs."""
+    generated = _run(
+        [PODMAN or "podman", "run", "--rm", "--ulimit", "nofile=4096:4096",
+         "--ulimit", "nproc=4096:4096", image, "cbdi", "compose", "paper-7x7",
+         "--agents", "2", "--image", image, "--runs", str(where / "runs"), "--timeout", "600",
+         *args],
+        where, 120,
+    )  # fmt: skip
+    assert generated.returncode == 0, generated.stderr
+    (where / "runs").mkdir(exist_ok=True)
+    path = where / f"run{len(list(where.glob('run*.yml')))}.yml"
+    path.write_text(generated.stdout)
+    return path
+
+
+def _compose(path: Path, project: str, api: str, *args: str) -> subprocess.CompletedProcess[str]:
+    argv = [COMPOSE or "docker-compose", "-f", str(path), "-p", project, *args]
+    return _run(argv, path.parent, 900, DOCKER_HOST=api)
+
+
+def _check_recording(recording: Path) -> None:
+    """The run ended done, both robots recycled something, the file is a valid MCAP."""
+    inspected = _run(
+        [str(BIN / "cbdi"), "inspect", "--json", str(recording)], recording.parent, 120
+    )
+    assert inspected.returncode == 0, inspected.stderr
+    report = json.loads(inspected.stdout)
+    assert report["result"] == "done"
+    recycled = {name: agent["recycled"] for name, agent in report["agents"].items()}
+    assert set(recycled) == {"robot1", "robot2"} and all(n > 0 for n in recycled.values())
+    rerun = shutil.which("rerun", path=str(BIN)) or shutil.which("rerun")
+    assert rerun, "rerun (rerun-sdk, a dev dependency) is missing"
+    checked = _run([rerun, "mcap", "check", str(recording)], recording.parent, 120)
+    assert checked.returncode == 0, checked.stdout[-2000:]
+
+
+def test_two_bdi_robots_in_containers_recycle_everything(
+    tmp_path: Path, image: str, podman_socket: str
+) -> None:
+    path = _generate(image, tmp_path)
+    project = f"cbdi-test-{os.getpid()}"
+    started = time.monotonic()
+    try:
+        up = _compose(path, project, podman_socket, "up", "--exit-code-from", "wait")
+        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+    finally:
+        _compose(path, project, podman_socket, "down")
+    print(f"run in {time.monotonic() - started:.0f} s")
+    _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def test_a_run_split_over_two_projects_with_joined_routers(
+    tmp_path: Path, image: str, podman_socket: str
+) -> None:
+    first, second = _free_port(), _free_port()
+    here = _generate(image, tmp_path, "--network", "host", "--port", str(first),
+                     "--only", "world,robot1")  # fmt: skip
+    there = _generate(image, tmp_path, "--network", "host", "--port", str(second),
+                      "--join", f"tcp/127.0.0.1:{first}", "--only", "robot2")  # fmt: skip
+    a, b = f"cbdi-test-a-{os.getpid()}", f"cbdi-test-b-{os.getpid()}"
+    try:
+        started = _compose(there, b, podman_socket, "up", "-d")
+        assert started.returncode == 0, started.stderr[-2000:]
+        up = _compose(here, a, podman_socket, "up", "--exit-code-from", "wait")
+        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+    finally:
+        _compose(there, b, podman_socket, "down")
+        _compose(here, a, podman_socket, "down")
+    _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
