@@ -21,6 +21,7 @@ from cbdi_planner.task import NExpr, NumAssign, NumCond, Task
 __all__ = ["INFINITE", "Estimate", "RelaxedPlanGraph"]
 
 INFINITE = 1 << 30
+KNOWN = 4096  # estimates remembered (oldest forgotten first): a few MB on a 30x30 map
 
 
 @dataclass(frozen=True, slots=True)
@@ -211,6 +212,7 @@ class RelaxedPlanGraph:
         self.free = [k for k, op in enumerate(ops) if not op.pre and op.kind != TIL]
         self.til_ops = [k for k, op in enumerate(ops) if op.kind == TIL]
         self.goal = _bits(self.task.goal)
+        self._known: dict[tuple[tuple[int, ...], object], Estimate] = {}
         self.op_duration = [self._duration(op) for op in ops]
         self.then = [then.get(k, -1) for k in range(len(ops))]
         # What firing op k does, in one record: (numeric or not, then, live, quiet). The
@@ -253,13 +255,27 @@ class RelaxedPlanGraph:
         return {f: reached[0][f] for f in wanted}
 
     def estimate(self, state: State) -> Estimate:
-        """Return the relaxed plan length and the helpful happenings of `state`."""
+        """Return the relaxed plan length and the helpful happenings of `state`.
+
+        The estimate is a function of the state and the goal aimed at, so the latest
+        ones are remembered: a climbing step forgets what the step before saw, and a
+        continual search evaluates again states a round before had reached.
+        """
+        key = (self.goal, state.key())
+        known = self._known.get(key)
+        if known is not None:
+            return known
         goals = list(self.goal) + [self.ended + a for a in state.open]
         reached = self._explore(state, goals)
         if reached is None:
-            return Estimate(INFINITE, frozenset())
-        level, achiever, op_level = reached
-        return self._extract(goals, level, achiever, op_level, state)
+            estimate = Estimate(INFINITE, frozenset())
+        else:
+            level, achiever, op_level = reached
+            estimate = self._extract(goals, level, achiever, op_level, state)
+        if len(self._known) >= KNOWN:
+            del self._known[next(iter(self._known))]  # the oldest
+        self._known[key] = estimate
+        return estimate
 
     def _explore(
         self, state: State, goals: list[int]
@@ -294,8 +310,9 @@ class RelaxedPlanGraph:
         while missing:
             for f in frontier:
                 for k in users[f]:
-                    counts[k] -= 1
-                    if counts[k] == 0:
+                    left = counts[k] - 1
+                    counts[k] = left
+                    if not left:
                         ready.append(k)
                 if extra:
                     for k in extra.get(f, ()):
