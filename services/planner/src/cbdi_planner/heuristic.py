@@ -229,7 +229,8 @@ class RelaxedPlanGraph:
             for k, op in enumerate(ops)
         ]
         self._everything = [
-            (numeric, nxt, (*live, *quiet), ()) for numeric, nxt, live, quiet in self._fire
+            (numeric, nxt, op.add, ())
+            for (numeric, nxt, _, _), op in zip(self._fire, ops, strict=True)
         ]
         self.chained_end = {ops[k].action: k for k in chained}
         self.start_op = {op.action: k for k, op in enumerate(ops) if op.kind == START}
@@ -295,10 +296,7 @@ class RelaxedPlanGraph:
         frontier += [self.pending + a for a in state.open]
         for f in frontier:
             level[f] = 0
-        is_goal = bytearray(self.size)
-        for g in goals:
-            is_goal[g] = 1
-        missing = sum(1 for g in set(goals) if level[g] < 0)
+        missing = [g for g in set(goals) if level[g] < 0]
         lo, hi = list(state.nums), list(state.nums)
         ready = self.free + self.til_ops[state.til :]
         extra = self._running_ends(state, level, counts, ready)
@@ -342,12 +340,10 @@ class RelaxedPlanGraph:
                         level[f] = next_level
                         achiever[f] = k
                         frontier.append(f)
-                        missing -= is_goal[f]
                 for f in quiet:
                     if level[f] < 0:
                         level[f] = next_level
                         achiever[f] = k
-                        missing -= is_goal[f]
             if not fired:
                 return None
             for k in acting:
@@ -355,6 +351,7 @@ class RelaxedPlanGraph:
                     _widen(effect, lo, hi)
             waiting = held
             depth = next_level
+            missing = [g for g in missing if level[g] < 0]
         return level, achiever, op_level
 
     def _running_ends(
