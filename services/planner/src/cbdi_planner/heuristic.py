@@ -21,6 +21,7 @@ from cbdi_planner.task import NExpr, NumAssign, NumCond, Task
 __all__ = ["INFINITE", "Estimate", "RelaxedPlanGraph"]
 
 INFINITE = 1 << 30
+KNOWN = 4096  # estimates remembered (oldest forgotten first): a few MB on a 30x30 map
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,11 +48,17 @@ class _Op:
 
 
 def _bits(mask: int) -> tuple[int, ...]:
+    """Return the positions of the set bits of `mask`, lowest first.
+
+    Scanning the binary text is linear in the width; peeling off the lowest bit of a
+    wide int costs a copy of the int per bit (a state of a 30x30 map has 650 of them).
+    """
+    text = bin(mask)[:1:-1]
     out = []
-    while mask:
-        low = mask & -mask
-        out.append(low.bit_length() - 1)
-        mask ^= low
+    i = text.find("1")
+    while i >= 0:
+        out.append(i)
+        i = text.find("1", i + 1)
     return tuple(out)
 
 
@@ -197,13 +204,34 @@ class RelaxedPlanGraph:
         self.counts = [len(op.pre) for op in ops]
         self.op_pre = [op.pre for op in ops]
         self.op_add = [op.add for op in ops]
+        # The facts an op adds split by whether some op counts them: the others (the
+        # `pending` and `ended` tokens of chained actions, mostly) get a layer but need
+        # no pass through the frontier.
         self.op_num_pre = [op.num_pre for op in ops]
         self.op_num_eff = [op.num_eff for op in ops]
         self.free = [k for k, op in enumerate(ops) if not op.pre and op.kind != TIL]
         self.til_ops = [k for k, op in enumerate(ops) if op.kind == TIL]
         self.goal = _bits(self.task.goal)
+        self._known: dict[tuple[tuple[int, ...], object], Estimate] = {}
         self.op_duration = [self._duration(op) for op in ops]
         self.then = [then.get(k, -1) for k in range(len(ops))]
+        # What firing op k does, in one record: (numeric or not, then, live, quiet). The
+        # facts it adds are split by whether some op counts them: the others (mostly
+        # the `pending` and `ended` tokens of chained actions) get a layer but need no
+        # pass through the frontier. `_everything`: all adds live, for `extra` counters.
+        self._fire = [
+            (
+                bool(op.num_pre or op.num_eff),
+                self.then[k],
+                tuple(f for f in op.add if users[f]),
+                tuple(f for f in op.add if not users[f]),
+            )
+            for k, op in enumerate(ops)
+        ]
+        self._everything = [
+            (numeric, nxt, op.add, ())
+            for (numeric, nxt, _, _), op in zip(self._fire, ops, strict=True)
+        ]
         self.chained_end = {ops[k].action: k for k in chained}
         self.start_op = {op.action: k for k, op in enumerate(ops) if op.kind == START}
 
@@ -228,13 +256,27 @@ class RelaxedPlanGraph:
         return {f: reached[0][f] for f in wanted}
 
     def estimate(self, state: State) -> Estimate:
-        """Return the relaxed plan length and the helpful happenings of `state`."""
+        """Return the relaxed plan length and the helpful happenings of `state`.
+
+        The estimate is a function of the state and the goal aimed at, so the latest
+        ones are remembered: a climbing step forgets what the step before saw, and a
+        continual search evaluates again states a round before had reached.
+        """
+        key = (self.goal, state.key())
+        known = self._known.get(key)
+        if known is not None:
+            return known
         goals = list(self.goal) + [self.ended + a for a in state.open]
         reached = self._explore(state, goals)
         if reached is None:
-            return Estimate(INFINITE, frozenset())
-        level, achiever, op_level = reached
-        return self._extract(goals, level, achiever, op_level, state)
+            estimate = Estimate(INFINITE, frozenset())
+        else:
+            level, achiever, op_level = reached
+            estimate = self._extract(goals, level, achiever, op_level, state)
+        if len(self._known) >= KNOWN:
+            del self._known[next(iter(self._known))]  # the oldest
+        self._known[key] = estimate
+        return estimate
 
     def _explore(
         self, state: State, goals: list[int]
@@ -242,71 +284,74 @@ class RelaxedPlanGraph:
         """Build the graph layer by layer until every goal is reached (None: never).
 
         Precondition counters make each layer cost only the operators its new facts
-        touch; an operator whose numeric condition cannot hold yet waits.
+        touch; an operator whose numeric condition cannot hold yet waits. Ops fire in
+        the order they became ready, so the first achiever of a fact is always the same.
         """
         level = [-1] * self.size
         achiever = [-1] * self.size
         op_level = [-1] * len(self.ops)
         counts = self.counts[:]
-        users, op_add, op_num_pre, op_num_eff = (
-            self.users,
-            self.op_add,
-            self.op_num_pre,
-            self.op_num_eff,
-        )
+        users, op_num_pre, op_num_eff = self.users, self.op_num_pre, self.op_num_eff
         frontier = list(_bits(state.facts))
         frontier += [self.pending + a for a in state.open]
         for f in frontier:
             level[f] = 0
-        is_goal = bytearray(self.size)
-        for g in goals:
-            is_goal[g] = 1
-        missing = sum(1 for g in set(goals) if level[g] < 0)
+        missing = [g for g in set(goals) if level[g] < 0]
         lo, hi = list(state.nums), list(state.nums)
         ready = self.free + self.til_ops[state.til :]
         extra = self._running_ends(state, level, counts, ready)
+        # A running action's end may count facts no op counts otherwise: then every
+        # new fact goes through the frontier.
+        fire = self._everything if extra else self._fire
         waiting: list[int] = []
-        then = self.then
         depth = 0
         while missing:
             for f in frontier:
                 for k in users[f]:
-                    counts[k] -= 1
-                    if counts[k] == 0:
+                    left = counts[k] - 1
+                    counts[k] = left
+                    if not left:
                         ready.append(k)
-                for k in extra.get(f, ()) if extra else ():
-                    counts[k] -= 1
-                    if counts[k] == 0:
-                        ready.append(k)
+                if extra:
+                    for k in extra.get(f, ()):
+                        counts[k] -= 1
+                        if counts[k] == 0:
+                            ready.append(k)
             held: list[int] = []
             acting: list[int] = []  # ops with numeric effects, applied after the layer
-            fired, due, frontier = False, ready, []
-            ready = []
-            for k in waiting + due:
+            due, frontier, ready = (waiting + ready if waiting else ready), [], []
+            fired, next_level = False, depth + 1
+            for k in due:
                 if op_level[k] >= 0:
                     continue
-                if op_num_pre[k] and not all(_may_hold(c, lo, hi) for c in op_num_pre[k]):
-                    held.append(k)
-                    continue
+                numeric, nxt, live, quiet = fire[k]
+                if numeric:
+                    if op_num_pre[k] and not all(_may_hold(c, lo, hi) for c in op_num_pre[k]):
+                        held.append(k)
+                        continue
+                    if op_num_eff[k]:
+                        acting.append(k)
                 op_level[k] = depth
                 fired = True
-                if then[k] >= 0:
-                    ready.append(then[k])
-                for f in op_add[k]:
+                if nxt >= 0:
+                    ready.append(nxt)
+                for f in live:
                     if level[f] < 0:
-                        level[f] = depth + 1
+                        level[f] = next_level
                         achiever[f] = k
                         frontier.append(f)
-                        missing -= is_goal[f]
-                if op_num_eff[k]:
-                    acting.append(k)
+                for f in quiet:
+                    if level[f] < 0:
+                        level[f] = next_level
+                        achiever[f] = k
             if not fired:
                 return None
             for k in acting:
                 for effect in op_num_eff[k]:
                     _widen(effect, lo, hi)
             waiting = held
-            depth += 1
+            depth = next_level
+            missing = [g for g in missing if level[g] < 0]
         return level, achiever, op_level
 
     def _running_ends(

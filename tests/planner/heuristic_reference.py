@@ -1,0 +1,378 @@
+"""The relaxed planning graph heuristic as it was before issue 13: the reference.
+
+`test_heuristic.py` checks that the optimised `cbdi_planner.heuristic` returns the same
+estimate and layers as this straightforward version on states sampled from searches.
+Kept verbatim apart from this docstring; do not optimise it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cbdi_planner.state import State
+from cbdi_planner.stn import END, INST, START, TIL
+from cbdi_planner.task import NExpr, NumAssign, NumCond, Task
+
+__all__ = ["Estimate", "RelaxedPlanGraph"]
+
+INFINITE = 1 << 30
+
+
+@dataclass(frozen=True, slots=True)
+class Estimate:
+    """A heuristic value and the helpful happenings `(kind, action)` of a state.
+
+    `duration` sums the durations of the relaxed plan's actions: a rough estimate of
+    the time still needed, which the anytime search weighs against makespan.
+    """
+
+    value: int
+    helpful: frozenset[tuple[int, int]]
+    duration: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class _Op:
+    kind: int
+    action: int
+    pre: tuple[int, ...]
+    add: tuple[int, ...]
+    num_pre: tuple[NumCond, ...]
+    num_eff: tuple[NumAssign, ...]
+
+
+def _bits(mask: int) -> tuple[int, ...]:
+    out = []
+    while mask:
+        low = mask & -mask
+        out.append(low.bit_length() - 1)
+        mask ^= low
+    return tuple(out)
+
+
+def _interval(expr: NExpr, lo: list[float], hi: list[float]) -> tuple[float, float]:
+    tag = expr[0]
+    if tag == "c":
+        return float(expr[1]), float(expr[1])
+    if tag == "v":
+        return lo[expr[1]], hi[expr[1]]
+    (a, b), (c, d) = _interval(expr[1], lo, hi), _interval(expr[2], lo, hi)
+    if tag == "+":
+        return a + c, b + d
+    if tag == "-":
+        return a - d, b - c
+    if tag == "*":
+        products = [
+            x * y for x in (a, b) for y in (c, d) if not (math.isinf(x) or math.isinf(y))
+        ] or [-math.inf, math.inf]
+        has_inf = any(math.isinf(v) for v in (a, b, c, d))
+        return (-math.inf, math.inf) if has_inf else (min(products), max(products))
+    return -math.inf, math.inf
+
+
+def _may_hold(cond: NumCond, lo: list[float], hi: list[float]) -> bool:
+    (a, b), (c, d) = _interval(cond.lhs, lo, hi), _interval(cond.rhs, lo, hi)
+    if any(math.isnan(v) for v in (a, b, c, d)):
+        return False
+    if cond.op in ("<", "<="):
+        return a < d or (cond.op == "<=" and a <= d)
+    if cond.op in (">", ">="):
+        return b > c or (cond.op == ">=" and b >= c)
+    return a <= d and c <= b
+
+
+def _widen(effect: NumAssign, lo: list[float], hi: list[float]) -> bool:
+    a, b = _interval(effect.expr, lo, hi)
+    old = (lo[effect.var], hi[effect.var])
+    if effect.op == "assign":
+        lo[effect.var], hi[effect.var] = min(old[0], a), max(old[1], b)
+    elif effect.op in ("increase", "decrease"):
+        up, down = (b > 0, a < 0) if effect.op == "increase" else (a < 0, b > 0)
+        if up:
+            hi[effect.var] = math.inf
+        if down:
+            lo[effect.var] = -math.inf
+    else:
+        lo[effect.var], hi[effect.var] = -math.inf, math.inf
+    return (lo[effect.var], hi[effect.var]) != old
+
+
+class RelaxedPlanGraph:
+    """Precomputed relaxed operators of a task; `estimate` evaluates one state."""
+
+    def __init__(self, task: Task, compress: bool = False) -> None:
+        """Build the relaxed operators; `compress`: one per action, for compressed search.
+
+        A compressed search has no running actions, so a durative action can be one
+        relaxed operator (FF's on the compressed task): it needs what its start needs
+        and what its invariant and end need beyond the start's effects, and adds what
+        both add. The relaxed plan then counts it once, and the graph is half as deep.
+        """
+        self.task = task
+        n_facts, n_actions = len(task.facts), len(task.actions)
+        self.pending = n_facts
+        self.ended = n_facts + n_actions
+        self.size = n_facts + 2 * n_actions + len(task.tils)
+        self.ops: list[_Op] = []
+        # then[k]: the end op that start op k enables by itself (its other conditions
+        # are the start's conditions or effects), fired one layer later without counters.
+        then: dict[int, int] = {}
+        for a in task.actions:
+            start = a.start
+            cond_add = 0
+            for ce in start.cond_effects:
+                cond_add |= ce.add
+            if a.end is None:
+                self.ops.append(
+                    _Op(
+                        INST,
+                        a.index,
+                        _bits(start.pre),
+                        _bits(start.add | cond_add),
+                        start.num_pre,
+                        start.num_eff,
+                    )
+                )
+                continue
+            end_add = a.end.add
+            for ce in a.end.cond_effects:
+                end_add |= ce.add
+            if compress:
+                self.ops.append(
+                    _Op(
+                        START,
+                        a.index,
+                        _bits(start.pre | ((a.inv | a.end.pre) & ~start.add)),
+                        _bits(start.add | cond_add | end_add),
+                        start.num_pre + a.end.num_pre + a.inv_num,
+                        start.num_eff + a.end.num_eff,
+                    )
+                )
+                continue
+            pre = start.pre | (a.inv & ~start.add)
+            if not (a.end.pre | a.inv) & ~(pre | start.add):
+                then[len(self.ops)] = len(self.ops) + 1
+            self.ops.append(
+                _Op(
+                    START,
+                    a.index,
+                    _bits(pre),
+                    (*_bits(start.add | cond_add), self.pending + a.index),
+                    start.num_pre,
+                    start.num_eff,
+                )
+            )
+            self.ops.append(
+                _Op(
+                    END,
+                    a.index,
+                    (*_bits(a.end.pre | a.inv), self.pending + a.index),
+                    (*_bits(end_add), self.ended + a.index),
+                    a.end.num_pre + a.inv_num,
+                    a.end.num_eff,
+                )
+            )
+        for i, til in enumerate(task.tils):
+            self.ops.append(_Op(TIL, i, (), _bits(til.add), (), ()))
+        self._index(then)
+
+    def _index(self, then: dict[int, int]) -> None:
+        """Flatten the operators into parallel lists for the inner loops of `estimate`."""
+        ops = self.ops
+        users: list[list[int]] = [[] for _ in range(self.size)]
+        adders: list[list[int]] = [[] for _ in range(self.size)]
+        chained = set(then.values())
+        for k, op in enumerate(ops):
+            for f in op.pre if k not in chained else ():
+                users[f].append(k)
+            for f in op.add:
+                adders[f].append(k)
+        self.users = [tuple(u) for u in users]
+        self.adders = [tuple(a) for a in adders]
+        self.counts = [len(op.pre) for op in ops]
+        self.op_pre = [op.pre for op in ops]
+        self.op_add = [op.add for op in ops]
+        self.op_num_pre = [op.num_pre for op in ops]
+        self.op_num_eff = [op.num_eff for op in ops]
+        self.free = [k for k, op in enumerate(ops) if not op.pre and op.kind != TIL]
+        self.til_ops = [k for k, op in enumerate(ops) if op.kind == TIL]
+        self.goal = _bits(self.task.goal)
+        self.op_duration = [self._duration(op) for op in ops]
+        self.then = [then.get(k, -1) for k in range(len(ops))]
+        self.chained_end = {ops[k].action: k for k in chained}
+        self.start_op = {op.action: k for k, op in enumerate(ops) if op.kind == START}
+
+    def _duration(self, op: _Op) -> float:
+        """Return the (least) duration an op stands for: its action's, for a start."""
+        if op.kind != START:
+            return 0.0
+        action = self.task.actions[op.action]
+        low, _ = action.duration_bounds(self.task.init_nums, 0.0)
+        return low if math.isfinite(low) else 0.0
+
+    def aim(self, goal: int) -> None:
+        """Estimate the distance to the facts `goal` from now on (the task's by default)."""
+        self.goal = _bits(goal)
+
+    def levels(self, state: State, facts: int) -> dict[int, int] | None:
+        """Return the first layer of each of `facts` in the graph of `state` (None: one never)."""
+        wanted = list(_bits(facts))
+        reached = self._explore(state, wanted)
+        if reached is None:
+            return None
+        return {f: reached[0][f] for f in wanted}
+
+    def estimate(self, state: State) -> Estimate:
+        """Return the relaxed plan length and the helpful happenings of `state`."""
+        goals = list(self.goal) + [self.ended + a for a in state.open]
+        reached = self._explore(state, goals)
+        if reached is None:
+            return Estimate(INFINITE, frozenset())
+        level, achiever, op_level = reached
+        return self._extract(goals, level, achiever, op_level, state)
+
+    def _explore(
+        self, state: State, goals: list[int]
+    ) -> tuple[list[int], list[int], list[int]] | None:
+        """Build the graph layer by layer until every goal is reached (None: never).
+
+        Precondition counters make each layer cost only the operators its new facts
+        touch; an operator whose numeric condition cannot hold yet waits.
+        """
+        level = [-1] * self.size
+        achiever = [-1] * self.size
+        op_level = [-1] * len(self.ops)
+        counts = self.counts[:]
+        users, op_add, op_num_pre, op_num_eff = (
+            self.users,
+            self.op_add,
+            self.op_num_pre,
+            self.op_num_eff,
+        )
+        frontier = list(_bits(state.facts))
+        frontier += [self.pending + a for a in state.open]
+        for f in frontier:
+            level[f] = 0
+        is_goal = bytearray(self.size)
+        for g in goals:
+            is_goal[g] = 1
+        missing = sum(1 for g in set(goals) if level[g] < 0)
+        lo, hi = list(state.nums), list(state.nums)
+        ready = self.free + self.til_ops[state.til :]
+        extra = self._running_ends(state, level, counts, ready)
+        waiting: list[int] = []
+        then = self.then
+        depth = 0
+        while missing:
+            for f in frontier:
+                for k in users[f]:
+                    counts[k] -= 1
+                    if counts[k] == 0:
+                        ready.append(k)
+                for k in extra.get(f, ()) if extra else ():
+                    counts[k] -= 1
+                    if counts[k] == 0:
+                        ready.append(k)
+            held: list[int] = []
+            acting: list[int] = []  # ops with numeric effects, applied after the layer
+            fired, due, frontier = False, ready, []
+            ready = []
+            for k in waiting + due:
+                if op_level[k] >= 0:
+                    continue
+                if op_num_pre[k] and not all(_may_hold(c, lo, hi) for c in op_num_pre[k]):
+                    held.append(k)
+                    continue
+                op_level[k] = depth
+                fired = True
+                if then[k] >= 0:
+                    ready.append(then[k])
+                for f in op_add[k]:
+                    if level[f] < 0:
+                        level[f] = depth + 1
+                        achiever[f] = k
+                        frontier.append(f)
+                        missing -= is_goal[f]
+                if op_num_eff[k]:
+                    acting.append(k)
+            if not fired:
+                return None
+            for k in acting:
+                for effect in op_num_eff[k]:
+                    _widen(effect, lo, hi)
+            waiting = held
+            depth += 1
+        return level, achiever, op_level
+
+    def _running_ends(
+        self, state: State, level: list[int], counts: list[int], ready: list[int]
+    ) -> dict[int, list[int]]:
+        """Set up the counters of the chained end ops of running actions.
+
+        A chained end op is not in `users`; for an action the state has started, its
+        conditions may not hold any more, so they are counted here (`pending` holds).
+        """
+        extra: dict[int, list[int]] = {}
+        for a in state.open:
+            k = self.chained_end.get(a)
+            if k is None:
+                continue
+            need = [f for f in self.op_pre[k] if level[f] < 0]
+            counts[k] = len(need)
+            if not need:
+                ready.append(k)
+            for f in need:
+                extra.setdefault(f, []).append(k)
+        return extra
+
+    def _extract(
+        self,
+        goals: list[int],
+        level: list[int],
+        achiever: list[int],
+        op_level: list[int],
+        state: State,
+    ) -> Estimate:
+        """Extract a relaxed plan backwards (FF); helpful = applicable ops adding layer-1 goals."""
+        top = max((level[g] for g in goals), default=0)
+        buckets: list[set[int]] = [set() for _ in range(top + 1)]
+        for g in goals:
+            buckets[level[g]].add(g)
+        chosen: set[int] = set()
+        done: set[int] = set()
+        sought: list[int] = []  # facts chosen ends of actions started at layer 0 give
+        op_pre, op_add, ops = self.op_pre, self.op_add, self.ops
+        for depth in range(top, 0, -1):
+            for g in buckets[depth]:
+                if g in done:
+                    continue
+                k = achiever[g]
+                if depth == 2 and ops[k].kind == END:
+                    sought.append(g)
+                if k in chosen:
+                    continue
+                chosen.add(k)
+                done.update(op_add[k])
+                for p in op_pre[k]:
+                    if level[p] > 0 and p not in done:
+                        buckets[level[p]].add(p)
+        helpful = set()
+        if top >= 1:
+            for g in buckets[1]:
+                for k in self.adders[g]:
+                    if op_level[k] == 0:
+                        op = ops[k]
+                        if op.kind != TIL or op.action == state.til:
+                            helpful.add((op.kind, op.action))
+        # FF's helpful actions are all those adding a goal of layer 1; a durative
+        # action adds its facts a layer after its start, so every action that could
+        # start now and whose end gives a fact the relaxed plan ends an action for is
+        # helpful too, not only the one the relaxed plan happened to choose.
+        for g in sought:
+            for k in self.adders[g]:
+                op = ops[k]
+                if op.kind == END and op_level[self.start_op[op.action]] == 0:
+                    helpful.add((START, op.action))
+        duration = sum(self.op_duration[k] for k in chosen)
+        return Estimate(len(chosen), frozenset(helpful), duration)
