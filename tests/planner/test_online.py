@@ -13,6 +13,7 @@ from cbdi.wire.agent import ActionStatus, PartialPlan
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
+from cbdi_planner.agent.transient import Transients
 from cbdi_planner.pddl import parse_domain
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -191,6 +192,34 @@ def test_a_goal_over_an_unknown_predicate_is_refused() -> None:
     assert core.search is None
     core.on_request(request())  # and the next good request is served
     assert core.search is not None
+
+
+def test_a_goal_behind_a_person_is_blocked_one_behind_a_bin_unsolvable() -> None:
+    core = ContinualPlanner(
+        "robot1", DOMAIN, PlanningSettings(round_interval=0), transients=Transients(["free"])
+    )
+    core.on_beliefs(beliefs(), 0.0)  # every cell but the bin's seen free
+    core.on_beliefs(beliefs(blocked=("c_3_0",)), 1.0)  # a person stands in the corridor
+
+    def failures(core: ContinualPlanner, req: SearchRequest) -> list[tuple[bool, str]]:
+        out = core.on_request(req) + drain(core)
+        return [(m.blocked, m.reason) for m in out if getattr(m, "status", "") == "failed"]  # type: ignore[attr-defined]
+
+    [(blocked, reason)] = failures(core, request())
+    assert blocked and "waiting" in reason and core.search is None
+    # The bin's cell was never free: nothing that moves can make it so.
+    goal = SearchRequest(
+        agent="robot1", request_id="s3", kind="start", goal=[["in", "robot1", "c_0_0"]]
+    )
+    assert [b for b, _ in failures(core, goal)] == [False]
+    # The person went: the same request plans.
+    core.on_beliefs(beliefs(), 2.0)
+    out = core.on_request(request()) + drain(core)
+    assert any(isinstance(m, PartialPlan) and m.complete for m in out)
+    # An agent that declares no transient predicates never waits.
+    plain = planner()
+    plain.on_beliefs(beliefs(blocked=("c_3_0",)), 1.0)
+    assert [b for b, _ in failures(plain, request())] == [False]
 
 
 def test_a_status_for_a_plan_never_published_is_refused() -> None:

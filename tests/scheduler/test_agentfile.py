@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from cbdi.agentfile import read_agent_file
 from cbdi.beliefs import BeliefSet, fact, fluent, instance
 from cbdi_scheduler.agentfile import AgentFileError, load_agent, parse_agent
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
@@ -33,6 +34,7 @@ def test_the_recycler_is_the_papers_plastic_agent() -> None:
     a = load_agent(AGENTS / "recycler.toml", "robot1")
     assert a.domain.name == "domain.pddl" and a.planning.mode == "online"
     assert a.preemption == "clean_preempt" and a.group == "recyclers"
+    assert read_agent_file(AGENTS / "recycler.toml", "robot1").transient == ("free",)
     beliefs = BeliefSet.of(a.beliefs)
     assert beliefs.holds(instance("robot1", "robot"))
     assert beliefs.fluents[("loaded_amount", "robot1")] == 0
@@ -70,6 +72,9 @@ def write(tmp_path: Path, body: str) -> Path:
             "unknown effect",
         ),
         ('[[rules]]\nwhen = [["(a"]]\nthen = []\n', "rules[0].when[0]", "missing ')'"),
+        ('transient_predicates = ["fre"]\n', "transient_predicates[0]", "no predicate 'fre'"),
+        ("transient_predicates = [3]\n", "transient_predicates[0]", "a predicate name"),
+        ('transient_predicates = "free"\n', "transient_predicates", "a list"),
     ],
 )
 def test_mistakes_name_the_field(tmp_path: Path, body: str, field: str, reason: str) -> None:

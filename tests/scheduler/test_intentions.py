@@ -127,6 +127,35 @@ def test_planning_failures_retry_when_beliefs_change_then_drop() -> None:
     assert kinds(out) == ["cancel_search", "drop"] and "planning failed 3 times" in out[-1].reason
 
 
+def test_a_blocked_goal_is_waited_out_not_dropped() -> None:
+    s = IntentionScheduler(plan_retries=1)
+    s.choose(RECYCLE)
+    first = s.on_search_failed("the goal can never hold", blocked=True)
+    assert kinds(first) == ["wait"] and first[0].desire == RECYCLE  # said once
+    for _ in range(10):  # a person standing on the goal for ten belief changes
+        assert kinds(s.retry()) == ["start_search"]
+        assert s.on_search_failed("the goal can never hold", blocked=True) == []
+    assert s.current is not None and s.current.plan_failures == 0
+    assert kinds(s.retry()) == ["start_search"]
+    assert kinds(s.on_plan(plan("p1", "s1"))) == ["execute"]  # the person moved on
+    assert not s.current.waiting
+    # A wait in which nothing changes (a person waiting for the robot that waits for it)
+    # counts after wait_stall seconds, searches again, and is dropped at the limit.
+    s3 = IntentionScheduler(plan_retries=1, wait_stall=5)
+    s3.choose(RECYCLE)
+    s3.on_search_failed("in the way", blocked=True, now=10)
+    assert s3.stalled(14) == []
+    assert kinds(s3.stalled(15)) == ["start_search"] and s3.current.plan_failures == 1
+    s3.on_search_failed("in the way", blocked=True, now=15)
+    out = s3.stalled(20)
+    assert kinds(out) == ["cancel_search", "drop"] and "nothing moving" in out[-1].reason
+    # Unsolvable failures still count and drop.
+    s2 = IntentionScheduler(plan_retries=1)
+    s2.choose(RECYCLE)
+    assert s2.on_search_failed("no plan") == []
+    assert kinds(s2.on_search_failed("no plan"))[-1] == "drop"
+
+
 def test_achieved_and_stale_messages() -> None:
     s = running()
     assert s.on_status(status("old-plan", "x", "failed")) == []  # not the current plan

@@ -67,6 +67,9 @@ class RawAgentFile:
     source: str
     domain: Path
     planning: PlanningSettings
+    # The domain's predicates that moving things change (a cell `free` of people and
+    # robots): a goal that only such beliefs block is waited out, not given up.
+    transient: tuple[str, ...] = ()
 
 
 def read_agent_file(path: str | Path, agent: str) -> RawAgentFile:
@@ -93,7 +96,30 @@ def parse_agent_text(text: str, source: str, base: Path) -> RawAgentFile:
     path = base / domain
     if not path.is_file():
         raise AgentFileError(source, "domain", f"no such file {path}")
-    return RawAgentFile(data, source, path, _planning(data.get("planning", {}), source))
+    planning = _planning(data.get("planning", {}), source)
+    return RawAgentFile(data, source, path, planning, _transient(data, source, path))
+
+
+def _transient(data: dict[str, Any], source: str, domain: Path) -> tuple[str, ...]:
+    """Read `transient_predicates`: names of predicates the domain declares."""
+    names = data.get("transient_predicates", [])
+    if not isinstance(names, list):
+        raise AgentFileError(source, "transient_predicates", "expected a list of predicate names")
+    if not names:
+        return ()
+    try:
+        declared = domain_signature(domain.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AgentFileError(source, "domain", f"cannot read {domain}: {exc}") from None
+    out = []
+    for i, name in enumerate(names):
+        where = f"transient_predicates[{i}]"
+        if not isinstance(name, str) or not name:
+            raise AgentFileError(source, where, "expected a predicate name")
+        if name.lower() not in declared:
+            raise AgentFileError(source, where, f"the domain has no predicate {name!r}")
+        out.append(name.lower())
+    return tuple(out)
 
 
 # The lower bound of each numeric planning setting (NaN and infinities never pass).

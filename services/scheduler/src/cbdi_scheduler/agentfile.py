@@ -48,6 +48,7 @@ class AgentFile:
     plan_retries: int = 3
     exec_retries: int = 3
     rtc_deadline: float = 2.0  # the executing desire's deadline: this many times its span
+    wait_stall: float = 8.0  # s a blocked wait may see nothing change before it counts
     claim: tuple[str, ...] = ()  # goal predicates whose first argument the group shares out
     beliefs: tuple[Belief, ...] = ()
     desires: tuple[Desire, ...] = ()
@@ -86,6 +87,7 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         plan_retries=r.natural(bdi, "plan_retries", 3, "scheduler"),
         exec_retries=r.natural(bdi, "exec_retries", 3, "scheduler"),
         rtc_deadline=_rtc_deadline(r.opt(bdi, "rtc_deadline", float, 2.0, "scheduler"), source),
+        wait_stall=_wait_stall(r.opt(bdi, "wait_stall", float, 8.0, "scheduler"), source),
         claim=tuple(
             r.check(p, str, f"scheduler.claim[{i}]")
             for i, p in enumerate(r.opt(bdi, "claim", list, [], "scheduler"))
@@ -99,6 +101,14 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         rules=tuple(r.rule(x, f"rules[{i}]") for i, x in enumerate(r.opt(data, "rules", list, []))),
         planning=raw.planning,
     )
+
+
+def _wait_stall(value: float, source: str) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise AgentFileError(
+            source, "scheduler.wait_stall", f"expected a number of seconds above 0, got {value}"
+        )
+    return float(value)
 
 
 def _rtc_deadline(value: float, source: str) -> float:

@@ -13,7 +13,11 @@ cancel a search, pass a plan to the executor, ask for an early arrest, drop a de
   `preempt` the executor stops after the running step and the new desire starts at once;
   under `clean_preempt` the new desire starts only once the executor reported it stopped.
 - Planning and execution failures are retried up to their limits, then the desire is
-  dropped with the reason.
+  dropped with the reason. A search that failed only because something that moves is in
+  the way (`blocked`: a person on the goal cell) is not a failure: the intention waits
+  and searches again whenever the beliefs change, until its desire's deadline. A wait
+  in which nothing changes for `wait_stall` seconds (a person waiting for the robot that
+  waits for it) counts as a failure and searches again, so a deadlock ends in a drop.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ __all__ = ["Command", "IntentionScheduler"]
 class Command:
     """Something the service must do: `kind` and what it needs."""
 
-    kind: str  # start_search | cancel_search | execute | arrest | drop | achieved
+    kind: str  # start_search | cancel_search | execute | arrest | drop | achieved | wait
     desire: Desire | None = None
     plan: PartialPlan | None = None
     plan_id: str = ""  # arrest: the executing plan
@@ -48,18 +52,25 @@ class Intention:
     last_started: str = ""
     plan_failures: int = 0
     exec_failures: int = 0
+    waiting: bool = False  # its goal is blocked by something that moves
+    quiet_since: float = 0.0  # when the wait last searched again
 
 
 class IntentionScheduler:
     """One agent's intention scheduler."""
 
     def __init__(
-        self, preemption: str = "clean_preempt", plan_retries: int = 3, exec_retries: int = 3
+        self,
+        preemption: str = "clean_preempt",
+        plan_retries: int = 3,
+        exec_retries: int = 3,
+        wait_stall: float = 8.0,
     ) -> None:
         if preemption not in ("no_preempt", "preempt", "clean_preempt"):
             raise ValueError(f"unknown preemption policy {preemption!r}")
         self.preemption = preemption
         self.plan_retries, self.exec_retries = plan_retries, exec_retries
+        self.wait_stall = wait_stall
         self.current: Intention | None = None
         # A replacement plan's parts, waiting for the executor to stop the current plan.
         self.pending: list[PartialPlan] = []
@@ -139,32 +150,66 @@ class IntentionScheduler:
     def _pass_on(self, plan: PartialPlan) -> list[Command]:
         cur = self.current
         assert cur is not None
+        cur.waiting = False
         cur.plan_id = plan.plan_id
         cur.steps += [s.step_id for s in plan.steps if s.step_id not in cur.steps]
         return [Command("execute", cur.desire, plan=plan)]
 
-    def on_search_failed(self, reason: str) -> list[Command]:
+    def on_search_failed(
+        self, reason: str, blocked: bool = False, now: float = 0.0
+    ) -> list[Command]:
         """The planner found no plan: retry once the beliefs change, or drop the desire.
 
         Planning again from the same beliefs would fail the same way (a person blocking
-        the only way is still there): the retry waits for `retry()`.
+        the only way is still there): the retry waits for `retry()`. A `blocked` failure
+        does not count: the intention waits (a `wait` command the first time).
         """
         cur = self.current
         if cur is None:
             return []
+        if blocked:
+            self.retry_reason = f"retry after: {reason}"
+            if cur.waiting:
+                return []
+            cur.waiting, cur.quiet_since = True, now
+            return [Command("wait", cur.desire, reason=reason)]
+        cur.waiting = False
+        return self._failed_planning(reason)
+
+    def _failed_planning(self, reason: str) -> list[Command]:
+        cur = self.current
+        assert cur is not None
         cur.plan_failures += 1
         if cur.plan_failures > self.plan_retries:
             return self._drop(f"planning failed {cur.plan_failures} times: {reason}")
         self.retry_reason = f"retry after: {reason}"
         return []
 
-    def retry(self) -> list[Command]:
+    def retry(self, now: float = 0.0) -> list[Command]:
         """The beliefs changed: start the search a failed planning is waiting for."""
         cur = self.current
         if cur is None or not self.retry_reason:
             return []
         reason, self.retry_reason = self.retry_reason, ""
+        cur.quiet_since = now
         return [Command("start_search", cur.desire, reason=reason)]
+
+    def stalled(self, now: float) -> list[Command]:
+        """Nothing changed: a blocked wait quiet for `wait_stall` seconds counts as a
+        failed planning (dropped after `plan_retries`) and searches again."""
+        cur = self.current
+        if (
+            cur is None
+            or not cur.waiting
+            or not self.retry_reason
+            or now - cur.quiet_since < self.wait_stall
+        ):
+            return []
+        reason = f"blocked for {now - cur.quiet_since:g} s with nothing moving"
+        dropped = self._failed_planning(reason)
+        if dropped:
+            return dropped
+        return self.retry(now)
 
     # -- the executor --------------------------------------------------------------------
     def on_status(self, status: ActionStatus) -> list[Command]:

@@ -46,7 +46,9 @@ class Mind:
         self.agent = spec.agent
         self.beliefs = BeliefSet.of(spec.beliefs)
         self.desires: dict[str, Desire] = {d.name: d for d in spec.desires}
-        self.intentions = IntentionScheduler(spec.preemption, spec.plan_retries, spec.exec_retries)
+        self.intentions = IntentionScheduler(
+            spec.preemption, spec.plan_retries, spec.exec_retries, spec.wait_stall
+        )
         self.now = 0.0
         self.epoch = -1
         self.refire = False  # fire the rules next cycle even if nothing changed
@@ -79,7 +81,12 @@ class Mind:
         self._coordinate(out)
         self._deliberate(out)
         if out.beliefs_changed:
-            out.commands += self.intentions.retry()
+            out.commands += self.intentions.retry(self.now)
+        else:
+            stalled = self._with_drops(self.intentions.stalled(self.now))
+            out.commands += stalled.commands
+            out.events += stalled.events
+            out.claims += stalled.claims
         return out
 
     def _fire(self, out: Reaction) -> None:
@@ -145,8 +152,8 @@ class Mind:
     def on_plan(self, plan: PartialPlan) -> Reaction:
         return Reaction(self.intentions.on_plan(plan))
 
-    def on_search_failed(self, reason: str) -> Reaction:
-        return self._with_drops(self.intentions.on_search_failed(reason))
+    def on_search_failed(self, reason: str, blocked: bool = False) -> Reaction:
+        return self._with_drops(self.intentions.on_search_failed(reason, blocked, self.now))
 
     def on_status(self, status: ActionStatus) -> Reaction:
         return self._with_drops(self.intentions.on_status(status))
@@ -165,6 +172,8 @@ class Mind:
             if c.kind == "drop" and c.desire is not None:
                 self.desires.pop(c.desire.name, None)
                 self._dropped(c.desire, c.reason, out)
+            elif c.kind == "wait" and c.desire is not None:
+                out.events.append(self.event(c.desire, "waiting", c.reason))
         return out
 
     def _dropped(self, desire: Desire, reason: str, out: Reaction) -> None:

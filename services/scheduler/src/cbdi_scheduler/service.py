@@ -217,7 +217,7 @@ class SchedulerService:
             return mind.on_plan(msg)
         if isinstance(msg, SearchStatus):
             if msg.request_id == self.search_id and msg.status == "failed":
-                return mind.on_search_failed(msg.reason)
+                return mind.on_search_failed(msg.reason, msg.blocked)
             return Reaction()
         if isinstance(msg, ActionStatus):
             return mind.on_status(msg)

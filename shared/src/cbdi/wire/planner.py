@@ -46,12 +46,19 @@ class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
 
 
 class SearchStatus(Message, frozen=True, tag="cbdi.planner.SearchStatus/1"):
-    """How the planner's search for `request_id` is going."""
+    """How the planner's search for `request_id` is going.
+
+    A `failed` search is `blocked` when the goal would be reachable if the beliefs the
+    agent file declares transient (`transient_predicates`: a cell `free` of people) were
+    as they have been seen before: something that moves is in the way, so the scheduler
+    waits for it to move instead of giving the desire up.
+    """
 
     agent: AgentName
     request_id: Id
     status: Symbol
     reason: Text = ""
+    blocked: bool = False
 
 
 class SearchRound(Message, frozen=True, tag="cbdi.planner.SearchRound/1"):

@@ -51,6 +51,7 @@ class Counted:
     plan: Plan | None
     expanded: int
     error: str = ""
+    timeout: bool = False  # the expansion bound ran out (no verdict on solvability)
 
 
 def plan_counted(domain: Domain, problem: Problem, max_expansions: int) -> Counted:
@@ -66,7 +67,7 @@ def plan_counted(domain: Domain, problem: Problem, max_expansions: int) -> Count
     if result.plan is not None:
         return Counted(result.plan, expanded)
     if result.status == "timeout":
-        return Counted(None, expanded, f"no plan within {max_expansions} expansions")
+        return Counted(None, expanded, f"no plan within {max_expansions} expansions", True)
     return Counted(None, expanded, f"no plan reaches the goal ({result.status})")
 
 

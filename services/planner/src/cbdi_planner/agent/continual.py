@@ -32,6 +32,7 @@ from cbdi_planner.agent.problem import (
     problem_from_beliefs,
 )
 from cbdi_planner.agent.steps import plan_steps
+from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import (
     FAILS_LATER,
     HOLDS,
@@ -47,7 +48,7 @@ from cbdi_planner.continual import (
     forecast,
 )
 from cbdi_planner.continual.improver import Improver
-from cbdi_planner.errors import PlannerError
+from cbdi_planner.errors import PlannerError, Unsolvable
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain
@@ -105,8 +106,10 @@ class ContinualPlanner:
         grid: float = 1.0,
         log: Log | None = None,
         improve: bool = True,
+        transients: Transients | None = None,
     ) -> None:
         self.agent, self.domain, self.settings, self.grid = agent, domain, settings, grid
+        self.transients = transients or Transients()
         self.log: Log = log or (lambda *a, **k: None)
         self.improve = improve
         self.beliefs = BeliefSet()
@@ -155,6 +158,13 @@ class ContinualPlanner:
         """
         try:
             return self._on_request(self._with_problem(req))
+        except Unsolvable as exc:
+            # Nothing reaches the goal from these beliefs (grounding): a failed search,
+            # blocked if only something that moves is in the way.
+            if req.kind == "start":
+                self.search, self.line = None, None
+            goal = self.request.goal if self.request is not None else req.goal
+            return [self._failure(req.request_id, str(exc), goal)]
         except (GoalError, PlannerError) as exc:
             raise BadRequestError(req.request_id, str(exc)) from exc
 
@@ -167,6 +177,7 @@ class ContinualPlanner:
         beliefs = beliefs_from_problem(problem)
         problem_from_beliefs(self.domain, beliefs, goal)  # the goal fits the domain
         self.beliefs = beliefs
+        self.transients.see(beliefs)
         return replace(req, goal=goal, problem="")
 
     def _on_request(self, req: SearchRequest) -> list[Message]:
@@ -214,6 +225,7 @@ class ContinualPlanner:
     def on_beliefs(self, beliefs: BeliefSet, now: float) -> list[Message]:
         """New beliefs: forecast the executing plan's failure and act on it."""
         self.beliefs, self.now = beliefs, max(self.now, now)
+        self.transients.see(beliefs)
         line, req = self.line, self.request
         if line is None or req is None or not line.steps:
             return []
@@ -364,7 +376,17 @@ class ContinualPlanner:
         if search.purpose in ("repair", "improve") and self.line is not None:
             self.log("repair_failed", plan=search.line.plan_id, reason=reason)
             return []  # the executing plan goes on; execution reports if it fails
-        return [self._status(search.request_id, "failed", reason)]
+        goal = self.request.goal if self.request is not None else []
+        return [self._failure(search.request_id, reason, goal)]
+
+    def _failure(self, request_id: str, reason: str, goal: list[list[str]]) -> SearchStatus:
+        """A failed search, `blocked` if the goal is reachable once moving things move."""
+        blocked = bool(goal) and self.transients.blocked(self.domain, self.beliefs, goal)
+        if blocked:
+            reason += " (blocked by something that moves: waiting for it)"
+        return SearchStatus(
+            agent=self.agent, request_id=request_id, status="failed", reason=reason, blocked=blocked
+        )
 
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line

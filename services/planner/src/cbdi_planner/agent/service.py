@@ -44,8 +44,9 @@ from cbdi_planner.agent.problem import (
     problem_from_beliefs,
 )
 from cbdi_planner.agent.steps import plan_steps
+from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import Event, RoundDone
-from cbdi_planner.errors import PlannerError
+from cbdi_planner.errors import PlannerError, SearchTimeout
 from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain, Problem
 from cbdi_planner.plan import Plan
@@ -202,6 +203,7 @@ class PlannerService(_Epochs):
         self.request: SearchRequest | None = None
         self.searching: asyncio.Task[None] | None = None
         self.plan_ids = count(1)
+        self.transients = Transients(raw.transient)
 
     def input_keys(self) -> list[str]:
         a = self.agent
@@ -214,6 +216,7 @@ class PlannerService(_Epochs):
         if isinstance(msg, BeliefsUpdate):
             self.beliefs, self.now = from_wire(msg), max(self.now, msg.time)
             self.has_beliefs = True
+            self.transients.see(self.beliefs)
             if self.deferred is not None:
                 req, self.deferred = self.deferred, None
                 await self.on_request(req)
@@ -268,7 +271,7 @@ class PlannerService(_Epochs):
             try:
                 p.result = await asyncio.to_thread(plan_counted, self.domain, p.problem, most)
             except (GoalError, PlannerError, ValueError) as exc:
-                p.result = Counted(None, 1, str(exc))
+                p.result = Counted(None, 1, str(exc), timeout=isinstance(exc, SearchTimeout))
             p.owed = p.result.expanded
         p.owed -= self.budget()
         if p.owed > 0:
@@ -278,7 +281,7 @@ class PlannerService(_Epochs):
             self.ctx.log.warning(
                 "search_failed", request=p.request.request_id, error=p.result.error
             )
-            await self.status(p.request.request_id, "failed", p.result.error)
+            await self.failed(p.request, p.result.error, timeout=p.result.timeout)
             return
         await self.publish_plan(p.request, p.result.plan)
 
@@ -288,6 +291,7 @@ class PlannerService(_Epochs):
             parsed = parse_problem(req.problem, self.domain, f"request {req.request_id}")
             goal = [list(g) for g in req.goal] or goal_of(parsed)
             self.beliefs, self.has_beliefs = beliefs_from_problem(parsed), True
+            self.transients.see(self.beliefs)
             req = replace(req, goal=goal, problem="")
         return req, problem_from_beliefs(self.domain, self.beliefs, req.goal)
 
@@ -301,7 +305,7 @@ class PlannerService(_Epochs):
         except (GoalError, PlannerError, ValueError) as exc:
             if self.request is req:
                 self.ctx.log.warning("search_failed", request=req.request_id, error=str(exc))
-                await self.status(req.request_id, "failed", str(exc))
+                await self.failed(req, str(exc), timeout=isinstance(exc, SearchTimeout))
             return
         if self.request is not req:
             return  # replaced or cancelled meanwhile
@@ -323,9 +327,21 @@ class PlannerService(_Epochs):
         await publish(self.ctx.bus, keys.planner_plans(self.agent), out, block=True)
         await self.status(req.request_id, "done")
 
-    async def status(self, request_id: str, status: str, reason: str = "") -> None:
-        msg = SearchStatus(agent=self.agent, request_id=request_id, status=status, reason=reason)
+    async def status(
+        self, request_id: str, status: str, reason: str = "", blocked: bool = False
+    ) -> None:
+        msg = SearchStatus(
+            agent=self.agent, request_id=request_id, status=status, reason=reason, blocked=blocked
+        )
         await publish(self.ctx.bus, keys.planner_status(self.agent), msg, block=True)
+
+    async def failed(self, req: SearchRequest, reason: str, timeout: bool) -> None:
+        """Report a failed search: blocked (not a timeout, and the goal is reachable once
+        the transient beliefs hold again) or not."""
+        blocked = not timeout and self.transients.blocked(self.domain, self.beliefs, req.goal)
+        if blocked:
+            reason += " (blocked by something that moves: waiting for it)"
+        await self.status(req.request_id, "failed", reason, blocked)
 
 
 class OnlinePlannerService(_Epochs):
@@ -471,6 +487,7 @@ def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -
                 settings.time_grid,
                 log=ctx.log.info,
                 improve=settings.improve,
+                transients=Transients(raw.transient),
             )
             online = OnlinePlannerService(ctx, core, settings.planning_speed, settings.ack_timeout)
             stream = sequenced_inputs(ctx.bus, online.input_keys(), ONLINE_INPUTS, ctx)
