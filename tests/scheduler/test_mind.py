@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cbdi.beliefs import fact
+from cbdi.beliefs import fact, instance
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
 from cbdi.wire.world import ActionOutcome, LitterView, Percepts
 from cbdi_scheduler.agentfile import load_agent
@@ -135,3 +135,29 @@ def test_a_boost_with_a_new_literal_gives_the_desire_its_span_again() -> None:
     assert mind.desires["recycle"].deadline == 94.0  # pla2 was seen at 30
     mind.on_percepts(percepts(40, [("pla1", (1, 1)), ("pla2", (1, 1))]))
     assert mind.desires["recycle"].deadline == 94.0  # nothing new: no refresh
+
+
+LITTER = [("pla1", (1, 1))]
+
+
+def test_a_stalled_wait_makes_the_robot_step_aside_then_resume() -> None:
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, LITTER))
+    mind.beliefs = mind.beliefs.adding(
+        [instance("c_0_2", "cell"), fact("near", "c_0_1", "c_0_2"), fact("free", "c_0_2")]
+    )
+    waiting = mind.on_search_failed("a person on the way", blocked=True)
+    assert [(e.desire, e.event) for e in waiting.events] == [("recycle", "waiting")]
+    events = []
+    for epoch in range(1, 12):  # the person waits for the robot: nothing changes
+        events += [
+            (epoch, e.desire, e.event) for e in mind.on_percepts(percepts(epoch, LITTER)).events
+        ]
+    assert (9, "step_aside", "added") in events and (9, "step_aside", "activated") in events
+    assert not [e for e in events if e[1] == "recycle" and e[2] == "dropped"]
+    assert mind.desires["step_aside"].goal == (fact("in", "robot1", "c_0_2"),)
+    # Stepped aside: the recycling desire is taken up again, with a fresh search.
+    out = mind.on_percepts(percepts(12, LITTER, position=(0, 2)))
+    assert ("recycle", "activated") in [(e.desire, e.event) for e in out.events]
+    assert [c.kind for c in out.commands][-1] == "start_search"
+    assert not [f for f in mind.beliefs.facts if f[0] == "stalled"]

@@ -54,6 +54,7 @@ class Intention:
     exec_failures: int = 0
     waiting: bool = False  # its goal is blocked by something that moves
     quiet_since: float = 0.0  # when the wait last searched again
+    stalled: bool = False  # its wait saw nothing change for wait_stall seconds
 
 
 class IntentionScheduler:
@@ -150,7 +151,7 @@ class IntentionScheduler:
     def _pass_on(self, plan: PartialPlan) -> list[Command]:
         cur = self.current
         assert cur is not None
-        cur.waiting = False
+        cur.waiting = cur.stalled = False
         cur.plan_id = plan.plan_id
         cur.steps += [s.step_id for s in plan.steps if s.step_id not in cur.steps]
         return [Command("execute", cur.desire, plan=plan)]
@@ -206,6 +207,7 @@ class IntentionScheduler:
         ):
             return []
         reason = f"blocked for {now - cur.quiet_since:g} s with nothing moving"
+        cur.stalled = True
         dropped = self._failed_planning(reason)
         if dropped:
             return dropped

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from cbdi.beliefs import BeliefSet
+from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
 from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
@@ -87,7 +87,21 @@ class Mind:
             out.commands += stalled.commands
             out.events += stalled.events
             out.claims += stalled.claims
+        self._believe_stalled()
         return out
+
+    def _believe_stalled(self) -> None:
+        """Believe `(stalled DESIRE)` while the intention's blocked wait is stalled, so a
+        rule can make the robot yield (step aside); the rules see it next cycle."""
+        cur = self.intentions.current
+        want = {("stalled", cur.desire.name)} if cur is not None and cur.stalled else set()
+        have = {f for f in self.beliefs.facts if f[0] == "stalled"}
+        if want == have:
+            return
+        self.beliefs = self.beliefs.removing(fact(*f) for f in have - want).adding(
+            fact(*f) for f in want - have
+        )
+        self.refire = True
 
     def _fire(self, out: Reaction) -> None:
         fired = fire_rules(self.spec.rules, self.beliefs, self.desires, self.now)
