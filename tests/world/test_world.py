@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cbdi.wire.world import ActionRequest
-from cbdi_world.errors import UnknownAgentError, WorldError
+from cbdi_world.errors import MapError, UnknownAgentError, WorldError
 from cbdi_world.maps import load_map, parse_map
 from cbdi_world.world import AgentSpec, World
 
@@ -150,6 +150,29 @@ def test_people_walk_their_loop_every_move_step_and_wait_when_blocked() -> None:
     for _ in range(2):
         w2.step()
     assert w2.people[0].cell == (2, 1)
+
+
+def test_a_person_blocked_for_its_patience_turns_round() -> None:
+    text = (
+        'name = "p"\ngrid = """\nB....\n.....\nA....\n"""\n'
+        '[[people]]\nname = "p"\nmove_step = 1\npatience = 3\n'
+        "path = [[1, 1], [2, 1], [3, 1], [3, 2], [2, 2], [1, 2]]\n"
+    )
+    w = World(parse_map(text), [AgentSpec("r", (0, 2))])
+    w.request(req("r", "move", (1, 2)))  # stand where the person's loop ends
+    cells = []
+    for _ in range(10):
+        w.step()
+        cells.append(w.people[0].cell)
+    # (2, 2) is reached after 4 epochs; blocked by the robot on (1, 2) for 3 epochs, the
+    # person walks back the way it came.
+    assert cells[:5] == [(2, 1), (3, 1), (3, 2), (2, 2), (2, 2)]
+    assert cells[6:9] == [(2, 2), (3, 2), (3, 1)]
+    assert w.people[0].cell != (1, 2) and w.agents["r"].cell == (1, 2)
+    forever = parse_map(text.replace("patience = 3", "patience = 0"))
+    assert forever.people[0].patience == 0
+    with pytest.raises(MapError, match=r"people\[0\]\.patience"):
+        parse_map(text.replace("patience = 3", "patience = -1"))
 
 
 def test_a_person_blocks_a_move() -> None:

@@ -37,11 +37,17 @@ _LEGEND = {".", "#", "B", "A", "L", "l"}
 
 @dataclass(frozen=True)
 class PersonSpec:
-    """A person walking a closed loop: starts at `path[0]`, steps every `move_step` epochs."""
+    """A person walking a closed loop: starts at `path[0]`, steps every `move_step` epochs.
+
+    A person whose next cell stays taken for `patience` epochs (a robot standing there,
+    itself waiting for the person) turns round and walks the loop the other way, as
+    people do; 0: waits for ever.
+    """
 
     name: str
     path: tuple[Cell, ...]
     move_step: int
+    patience: int = 12
 
 
 @dataclass(frozen=True)
@@ -240,7 +246,10 @@ class _Reader:
             raise self.fail(
                 f"{where}.path", "the loop is not closed: the last cell must be next to the first"
             )
-        return PersonSpec(name=str(name), path=tuple(path), move_step=step)
+        patience = raw.get("patience", 12)
+        if not isinstance(patience, int) or isinstance(patience, bool) or patience < 0:
+            raise self.fail(f"{where}.patience", f"expected an integer >= 0, got {patience!r}")
+        return PersonSpec(name=str(name), path=tuple(path), move_step=step, patience=patience)
 
     def check_people_apart(self, people: tuple[PersonSpec, ...], starts: tuple[Cell, ...]) -> None:
         seen: dict[Cell, str] = {}

@@ -80,6 +80,14 @@ class PersonState:
     move_step: int
     index: int = 0
     countdown: int = 0
+    patience: int = 0  # epochs blocked before turning round (0: never)
+    waited: int = 0  # epochs blocked so far
+
+    def turn_round(self) -> None:
+        """Walk the loop the other way from here."""
+        self.path = self.path[::-1]
+        self.index = len(self.path) - 1 - self.index
+        self.waited = 0
 
     @property
     def cell(self) -> Cell:
@@ -143,7 +151,7 @@ class World:
                 index = start_index(p.path, taken, self._stream(f"people-phase:{p.name}"))
                 taken.add(p.path[index])
             wait = countdown(p.move_step, self.chance.people_jitter, self._jitter(p.name))
-            people.append(PersonState(p.name, p.path, p.move_step, index, wait))
+            people.append(PersonState(p.name, p.path, p.move_step, index, wait, p.patience))
         return people
 
     def _jitter(self, person: str) -> random.Random:
@@ -275,9 +283,12 @@ class World:
                 continue
             nxt = (p.index + 1) % len(p.path)
             if p.path[nxt] in self.occupant:
-                continue  # blocked: try again next epoch
+                p.waited += 1  # blocked: try again next epoch, or turn round
+                if p.patience and p.waited >= p.patience:
+                    p.turn_round()
+                continue
             del self.occupant[p.cell]
-            p.index = nxt
+            p.index, p.waited = nxt, 0
             self.occupant[p.cell] = p.name
             p.countdown = countdown(p.move_step, self.chance.people_jitter, self._jitter(p.name))
 
