@@ -245,8 +245,9 @@ def scenario_text(map_path: Path, scenario_path: Path, agents: int, agent_file: 
     """Return a lockstep BDI scenario running `agents` robots on the map at `map_path`."""
     base = scenario_path.resolve().parent
     rel = Path(map_path).resolve()
+    agent = agent_file.resolve()
     entries = "".join(
-        f'\n[[agents]]\nname = "robot{i + 1}"\nkind = "bdi"\nagent_file = "{agent_file.resolve()}"\n'
+        f'\n[[agents]]\nname = "robot{i + 1}"\nkind = "bdi"\nagent_file = "{agent}"\n'
         for i in range(agents)
     )
     return (
