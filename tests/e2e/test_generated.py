@@ -19,9 +19,9 @@ SEED = 1
 def generated(tmp_path: Path) -> Path:
     """`cbdi map` as a user runs it: a 9x9 map with two start cells and its scenario."""
     scenario = tmp_path / f"gen-{SEED}-bdi.toml"
+    argv = ["map", "--seed", str(SEED), "--agents", "2", "-o", str(tmp_path / "m.toml")]
     subprocess.run(
-        [CBDI, "map", "--seed", str(SEED), "--agents", "2", "-o", str(tmp_path / "m.toml")]
-        + ["--scenario", str(scenario)],
+        [CBDI, *argv, "--scenario", str(scenario)],
         check=True,
         cwd=REPO,
     )
