@@ -173,6 +173,21 @@ def test_early_arrest_waits_for_steps_up_to_the_arrest_point() -> None:
     assert other.cancelled == []
 
 
+def test_a_step_the_world_rejects_during_an_early_arrest_ends_it_with_a_true_report() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0), move(2, 2.0)), 0)
+    assert d.early_arrest("p", "s1", 0.0).arrest is None
+    finish(d, start(d, 0.0, FREE), 1.0)
+    out = d.tick(1.0, FREE)  # s1 may still start: it goes to the world, which says no
+    reply = ActionReply(request_id=out.requests[0].request_id, accepted=False, reason="busy")
+    rejected = d.on_reply(reply, 1.0)
+    assert ("s1", "failed") in statuses(rejected) and ("s2", "cancelled") in statuses(rejected)
+    report = rejected.arrest
+    assert report is not None and report.plan_id == "p"
+    assert report.last_step == "s0"  # the last step that ran, not one that never started
+    assert report.cancelled == ["s2"]
+
+
 def test_checks_and_bindings() -> None:
     beliefs = FREE
     assert first_failing([Check(atom=["loaded_amount", "r"], op="LT", value=3)], beliefs) is None

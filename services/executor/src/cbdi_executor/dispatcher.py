@@ -181,14 +181,15 @@ class Dispatcher:
         if self.arrest is None or self.running() is not None:
             return
         plan_id, last = self.arrest
-        started = [s for s in self.steps if s.plan_id == plan_id and s.status != "waiting"]
         if any(s.status == "waiting" and not self._arrested(s) for s in self.steps):
             return  # steps up to `last` still have to run
-        cancelled = []
         for s in self.steps:
             if s.status == "waiting" and self._arrested(s):
                 self._set(s, "cancelled", f"early arrest after {last}", now, out)
-                cancelled.append(s.step.step_id)
+        ours = [s for s in self.steps if s.plan_id == plan_id]
+        # Started: accepted by the world (a refused or rejected step never ran).
+        started = [s for s in ours if s.ends_at != float("inf")]
+        cancelled = [s.step.step_id for s in ours if s.status == "cancelled"]
         done = started[-1].step.step_id if started else ""
         out.arrest = ArrestReport(
             agent=self.agent, plan_id=plan_id, last_step=done, time=now, cancelled=cancelled

@@ -176,7 +176,9 @@ class ExecutorService:
                 reply = await request(bus, keys.world_rpc("act"), req, ActionReply)
             except CbdiError as exc:
                 reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
-            effects.statuses += self.dispatcher.on_reply(reply, now).statuses
+            answered = self.dispatcher.on_reply(reply, now)
+            effects.statuses += answered.statuses
+            effects.arrest = answered.arrest or effects.arrest  # a rejection may end an arrest
         for status in effects.statuses:
             self.ctx.log.info(
                 "step",
