@@ -163,10 +163,10 @@ async def _run(
     loop = asyncio.get_running_loop()
 
     def stop() -> None:
+        guard.stop_hard_later()  # first: nothing below may keep an orphan alive
+        ctx.stop()
         if guard.orphaned:
             log.warning("orphaned", parent=guard.parent, grace=guard.grace)
-            guard.stop_hard_later()
-        ctx.stop()
 
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop)
