@@ -33,7 +33,7 @@ STARTED = re.compile(r"started service=(\S+) pid=(\d+)")
 
 def _up(log: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
     return subprocess.Popen(
-        [CBDI, "up", "paper-7x7", "--json", "--quiet", *args],
+        [CBDI, "up", "paper-7x7", "--json", *args],
         stdout=subprocess.PIPE,
         stderr=log.open("w"),
         text=True,
@@ -86,7 +86,7 @@ def _kill_all(pids: list[int]) -> None:
 def test_sigkill_of_cbdi_up_leaves_no_process_behind(tmp_path: Path) -> None:
     port = free_port()
     log = tmp_path / "up.log"
-    up = _up(log, "--port", str(port))
+    up = _up(log, "--port", str(port), "--quiet")
     try:
         wait_for(
             lambda: set(_started(log)) == set(SERVICES), timeout=120, what="every service started"
@@ -115,9 +115,16 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
     # that stall short (resynchronising at once is the run's recovery, not the watchdog's).
     up = _up(log, "--record", str(record), env={"CBDI_ACK_TIMEOUT": "10"})
     try:
-        wait_for(lambda: "robot1/executor" in _started(log), timeout=120, what="the agent")
+        # Freeze a planner at work: ready (so heard), the robot acting.
+        wait_for(
+            lambda: (
+                re.search(r"robot1/planner .*event=ready", log.read_text())
+                and "event=act " in log.read_text()
+            ),
+            timeout=120,
+            what="the robot to act",
+        )
         planner = _started(log)["robot1/planner"]
-        time.sleep(1.0)  # let it run a little: freeze a planner at work
         os.kill(planner, signal.SIGSTOP)
         stopped = time.monotonic()
         frozen_line = "frozen service=robot1/planner"
