@@ -114,6 +114,7 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
     # The restarted planner missed the epoch the world waits for: a short ack timeout keeps
     # that stall short (resynchronising at once is the run's recovery, not the watchdog's).
     up = _up(log, "--record", str(record), env={"CBDI_ACK_TIMEOUT": "10"})
+    planner = 0
     try:
         # Freeze a planner at work: ready (so heard), the robot acting.
         wait_for(
@@ -136,6 +137,8 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
         out, _ = up.communicate(timeout=240)
     finally:
         up.kill()
+        if planner:  # a stopped process takes no SIGTERM, not even its parent-death one
+            _kill_all([planner])
     text = log.read_text()
     summary = json.loads(out)
     print(f"frozen planner detected {detected:.2f} s after SIGSTOP")

@@ -81,3 +81,12 @@ def test_when_everyone_falls_silent_only_the_router_is_judged() -> None:
 def test_a_limit_the_checks_cannot_meet_is_refused(limit: float, tick: float) -> None:
     with pytest.raises(ValueError, match="tick"):
         Watchdog(limit, tick)
+
+
+def test_a_process_that_never_beats_is_judged_after_the_startup_limit() -> None:
+    dog = Watchdog(2.0, 0.1, startup=5.0)
+    _beating(dog, 3.0, RUN)
+    restarted = {**RUN, "robot1/planner": 13}  # frozen while starting: never a beat
+    found = _checks(dog, 3.1, 12.0, restarted)
+    assert [(f.service, f.pid) for f in found] == [("robot1/planner", 13)]
+    assert 5.0 < found[0].silent_for <= 5.2

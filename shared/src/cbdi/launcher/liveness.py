@@ -43,11 +43,13 @@ class Watchdog:
     """Judge services frozen within `limit` seconds of their process's last heartbeat,
     checked every `tick` seconds."""
 
-    def __init__(self, limit: float, tick: float) -> None:
+    def __init__(self, limit: float, tick: float, startup: float = 30.0) -> None:
         if not (math.isfinite(limit) and math.isfinite(tick) and 0 < tick < limit):
             raise ValueError(f"need 0 < tick < limit (finite), got tick {tick}, limit {limit}")
         self.limit = limit
         self.tick = tick
+        self.startup = max(startup, limit)
+        self._seen: dict[tuple[str, int], float] = {}  # process -> first check it ran at
         self._heard: dict[str, tuple[int, float]] = {}  # service -> (pid, last beat)
         self._judged: set[tuple[str, int]] = set()
         self._checked: float | None = None
@@ -59,19 +61,27 @@ class Watchdog:
     def check(self, now: float, running: Mapping[str, int]) -> list[Frozen]:
         """Return the services of `running` (service -> current pid) newly judged frozen.
 
-        A service is watched once its current process beat; each process is judged once.
+        A service is watched once its current process beat; one that never beats is
+        judged `startup` seconds after it was first seen running. Each process is judged
+        once.
         """
         late = self._checked is not None and now - self._checked > self.limit / 2
         self._checked = now
         if late:
             self._heard = {s: (pid, now) for s, (pid, _) in self._heard.items()}
+            self._seen = {p: now for p in self._seen}
             return []
+        for process in running.items():
+            self._seen.setdefault(process, now)
         watched = {
             s: now - self._heard[s][1]
             for s, pid in running.items()
             if s in self._heard and self._heard[s][0] == pid
         }
         silent = {s: t for s, t in watched.items() if t > self.limit - self.tick}
+        for s, pid in running.items():  # never heard: frozen while starting (or mute)
+            if s not in watched and now - self._seen[(s, pid)] > self.startup:
+                silent[s] = now - self._seen[(s, pid)]
         if len(watched) > 1 and len(silent) == len(watched):
             silent = {s: t for s, t in silent.items() if s == ROUTER}
         found = [

@@ -220,7 +220,7 @@ async def _start_all(
 
         tg.create_task(text_view(bus, sys.stdout))
     if opts.heartbeat > 0:
-        dog = Watchdog(opts.freeze_limit, TICK)
+        dog = Watchdog(opts.freeze_limit, TICK, opts.startup_timeout)
         tg.create_task(watch_heartbeats(bus, dog))
         tg.create_task(watch_processes(bus, dog, procs))
     await _wait_alive(live, [router], opts)
