@@ -189,3 +189,30 @@ def test_beliefs_that_decode_always_make_a_belief_set(
     except WireError:
         return
     from_wire(update)  # never a ValueError: the wire types rule out what it refuses
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"service": "", "pid": 1, "beat": 0},
+        {"service": "robot1/planner", "pid": -1, "beat": 0},
+        {"service": "robot1/planner", "pid": 1, "beat": "0"},
+    ],
+)
+def test_a_heartbeat_out_of_its_bounds_is_refused(fields: dict[str, object]) -> None:
+    from cbdi.wire.common import Heartbeat
+
+    payload = msgpack.packb({"schema": schema_of(Heartbeat), **fields})
+    with pytest.raises(WireError):
+        decode(payload, Heartbeat)
+
+
+def test_a_freeze_report_needs_finite_non_negative_times() -> None:
+    from cbdi.wire.common import ServiceFrozen
+
+    ok = ServiceFrozen(service="robot1/planner", pid=7, silent_for=1.9, limit=2.0)
+    assert decode(encode(ok), ServiceFrozen) == ok
+    for bad in (float("nan"), float("inf"), -1.0):
+        raw = msgpack.packb({**msgpack.unpackb(encode(ok)), "silent_for": bad})
+        with pytest.raises(WireError):
+            decode(raw, ServiceFrozen)

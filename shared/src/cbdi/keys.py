@@ -9,6 +9,7 @@ Layout (documented in docs/protocol.md):
 - error streams: `cbdi/world/errors`, `cbdi/<agent>/<component>/errors`
 - liveliness tokens: `cbdi/alive/<service-id>` where the service id is `world`,
   `monitor`, or `<agent>/<component>`
+- heartbeats: `cbdi/heartbeat/<service-id>` (each service's event loop, wall clock)
 - request tracing for recorders: `cbdi/trace/<request key>`
 - the launcher's word for recorders: `cbdi/launcher/<stream>` (`run`: what it started)
 """
@@ -21,6 +22,7 @@ __all__ = [
     "ALIVE_ALL",
     "CLOCK",
     "EVENTS",
+    "HEARTBEAT_ALL",
     "ROOT",
     "SNAPSHOT",
     "STATS",
@@ -36,6 +38,8 @@ __all__ = [
     "errors",
     "executor_arrested",
     "executor_status",
+    "heartbeat",
+    "is_heartbeat",
     "launcher_stream",
     "member",
     "monitor_stream",
@@ -64,6 +68,7 @@ __all__ = [
 ROOT = "cbdi"
 WORLD = "world"
 ALIVE_ALL = f"{ROOT}/alive/**"
+HEARTBEAT_ALL = f"{ROOT}/heartbeat/**"
 
 # World streams (published by the world service).
 CLOCK = f"{ROOT}/{WORLD}/clock"
@@ -72,7 +77,7 @@ STATS = f"{ROOT}/{WORLD}/stats"
 EVENTS = f"{ROOT}/{WORLD}/events"
 
 # Names that may not be used as agents because they are shared chunks of the layout.
-_RESERVED = {WORLD, "alive", "trace", "monitor", "launcher"}
+_RESERVED = {WORLD, "alive", "heartbeat", "trace", "monitor", "launcher"}
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]{0,62}$")
 
 
@@ -233,6 +238,16 @@ def alive(service: str) -> str:
     return f"{ROOT}/alive/{service}"
 
 
+def heartbeat(service: str) -> str:
+    """Return the key on which a service id sends its heartbeats."""
+    return f"{ROOT}/heartbeat/{service}"
+
+
+def is_heartbeat(key: str) -> bool:
+    """Return whether `key` is a heartbeat's (wall-clock: never part of a lockstep epoch)."""
+    return key.startswith(f"{ROOT}/heartbeat/")
+
+
 def service_of_alive(key: str) -> str:
     """Return the service id of a liveliness token key (inverse of `alive`)."""
     prefix = f"{ROOT}/alive/"
@@ -258,10 +273,10 @@ def describe(key: str) -> dict[str, str]:
     if head == WORLD:
         agent = rest[1] if len(rest) == 2 and rest[0] in ("percepts", "outcomes") else ""
         return {"agent": agent, "component": WORLD, "stream": "/".join(rest)}
-    if head == "alive":
+    if head in ("alive", "heartbeat"):
         if len(rest) == 2:
-            return {"agent": rest[0], "component": rest[1], "stream": "alive"}
-        return {"agent": "", "component": "/".join(rest), "stream": "alive"}
+            return {"agent": rest[0], "component": rest[1], "stream": head}
+        return {"agent": "", "component": "/".join(rest), "stream": head}
     if head in ("trace", "monitor", "launcher"):
         return {"agent": "", "component": head, "stream": "/".join(rest)}
     return {"agent": head, "component": rest[0] if rest else "", "stream": "/".join(rest[1:])}

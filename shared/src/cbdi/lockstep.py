@@ -324,7 +324,13 @@ class Lockstep:
 
 def ack(agent: str, component: str, epoch: int, stage: str, bus: Bus) -> EpochAck:
     """Return the ack of `epoch` at `stage` with what `bus` has sent so far."""
-    sent = {k: n for k, n in sorted(bus.sent.items()) if not k.endswith("/ack")}
+    # Acks and heartbeats (wall-clock, as many as the machine's pace gives) say nothing
+    # of what the epoch's inputs are.
+    sent = {
+        k: n
+        for k, n in sorted(bus.sent.items())
+        if not k.endswith("/ack") and not keys.is_heartbeat(k)
+    }
     if len(sent) > MAX_SENT_KEYS:
         sent = dict(list(sent.items())[:MAX_SENT_KEYS])
     return EpochAck(agent=agent, epoch=epoch, component=component, stage=stage, sent=sent)  # type: ignore[arg-type]

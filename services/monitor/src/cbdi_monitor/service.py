@@ -2,7 +2,10 @@
 
 Zenoh subscribers see publications only, so requests and replies reach the file through
 the trace keys every typed request endpoint publishes on. Services appearing and
-disappearing are logged, recorded and announced on `cbdi/monitor/health`.
+disappearing are logged, recorded and announced on `cbdi/monitor/health`. Heartbeats
+(`cbdi/heartbeat/**`) are not recorded: wall-clock noise, two a second per service,
+that a replay would only republish; the launcher's verdicts on them
+(`ServiceFrozen` on `cbdi/launcher/health`) are.
 """
 
 from __future__ import annotations
@@ -71,6 +74,8 @@ class Monitor:
             pass
 
     def write(self, sample: Sample) -> None:
+        if keys.is_heartbeat(sample.key):
+            return
         written = self.recorder.write(
             sample.key, sample.payload, time.time_ns(), sample.sent_ns, sample.seq
         )

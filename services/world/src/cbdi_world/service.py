@@ -10,6 +10,7 @@ from the injected clock: `speed` simulated seconds per wall second, or as fast a
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 
@@ -54,6 +55,12 @@ class WorldSettings(ServiceSettings):
     )
     max_time: float = field(default=0.0, metadata={"help": "end the run at this simulated time"})
     stop_when_done: bool = field(default=True, metadata={"help": "end when all litter recycled"})
+    linger: float = field(
+        default=0.0,
+        metadata={
+            "help": "after the run ends, answer this many wall s, then exit (0: till stopped)"
+        },
+    )
     lockstep: bool = field(
         default=False, metadata={"help": "virtual time: each epoch waits for every member's ack"}
     )
@@ -178,7 +185,9 @@ class WorldService:
                 await self.acks.observe(ack)
 
     async def run(self) -> None:
-        """Publish epoch 0, then step until the run ends; keep serving requests after."""
+        """Publish epoch 0, then step until the run ends; keep serving requests after,
+        `linger` wall seconds (then stop: a run's world does not outlive it) or until
+        stopped."""
         await self.wait_for_agents()
         # The static world once, for recorders and viewers (also on request: rpc/info).
         await publish(self.ctx.bus, keys.world_stream("info"), self.info, block=True)
@@ -190,6 +199,10 @@ class WorldService:
             await self.publish_epoch(result)
             await self.check_end()
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
+        if self.settings.linger > 0:
+            await WallClock().sleep(self.settings.linger)
+            self.ctx.log.info("lingered", seconds=self.settings.linger)
+            self.ctx.stop()
 
     async def wait_for_agents(self) -> None:
         """The start barrier: epoch 0 waits until every member said it is ready."""
@@ -259,6 +272,8 @@ def build_world(settings: WorldSettings) -> World:
     """Load the map and place the agents; raise a CbdiError/WorldError naming what is wrong."""
     if not settings.map:
         raise WorldError("no map given (--map FILE)")
+    if not (math.isfinite(settings.linger) and settings.linger >= 0):
+        raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
     world_map = with_situation(
         load_map(settings.map),
         move_step=settings.move_step,

@@ -25,6 +25,7 @@ from cbdi.launcher.scenario import (
     find_scenario,
     load_scenario,
 )
+from cbdi.launcher.watch import TICK
 
 __all__ = ["main", "scenario_arguments", "scenario_from_args"]
 
@@ -118,6 +119,20 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="start a service (e.g. robot1/scheduler) late, to try another start order",
     )
     p.add_argument(
+        "--heartbeat",
+        type=float,
+        default=0.5,
+        metavar="SECONDS",
+        help="wall seconds between each service's heartbeats (0: none, no freeze watchdog)",
+    )
+    p.add_argument(
+        "--freeze-limit",
+        type=float,
+        default=2.0,
+        metavar="SECONDS",
+        help="a service silent this long is frozen: reported, killed, restarted by policy",
+    )
+    p.add_argument(
         "--record",
         metavar="FILE",
         default="",
@@ -194,6 +209,16 @@ def _delays(entries: Sequence[str], scenario: Scenario) -> dict[str, float]:
     return delays
 
 
+def _check_liveness(heartbeat: float, limit: float) -> None:
+    """Refuse a heartbeat the freeze limit could not hear twice (or non-finite values)."""
+    if not (math.isfinite(heartbeat) and heartbeat >= 0):
+        raise ConfigError("--heartbeat", str(heartbeat), "must be a finite number >= 0")
+    if heartbeat > 0 and not (math.isfinite(limit) and limit >= 2 * heartbeat + TICK):
+        raise ConfigError(
+            "--freeze-limit", str(limit), f"must be at least twice --heartbeat plus {TICK} s"
+        )
+
+
 def _say_factory(quiet: bool) -> object:
     def say(service: str, line: str) -> None:
         if quiet and service != "launcher":
@@ -215,6 +240,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     try:
         delays = _delays(args.delay, scenario)
+        _check_liveness(args.heartbeat, args.freeze_limit)
     except ConfigError as exc:
         print(f"cbdi up: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -227,6 +253,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         view=args.view,
         quiet=args.quiet,
         record=args.record,
+        heartbeat=args.heartbeat,
+        freeze_limit=args.freeze_limit,
     )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]

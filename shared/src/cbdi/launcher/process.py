@@ -1,4 +1,8 @@
-"""One supervised OS process of a run: started, log-prefixed, restarted by policy."""
+"""One supervised OS process of a run: started, log-prefixed, restarted by policy.
+
+Every child is told the launcher's pid (`cbdi.runtime.parent`): it asks Linux for
+SIGTERM when the launcher dies, even by SIGKILL, so a run leaves no orphan behind.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +13,8 @@ import signal
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+
+from cbdi.runtime.parent import child_env
 
 __all__ = ["ManagedProcess", "ProcessSpec", "RestartPolicy"]
 
@@ -70,6 +76,7 @@ class ManagedProcess:
         self.sink = sink
         self.proc: asyncio.subprocess.Process | None = None
         self.restarts = 0
+        self.freezes = 0
         self.exit_codes: list[int] = []
         self.tail: deque[str] = deque(maxlen=20)
         self.stopping = False
@@ -80,9 +87,14 @@ class ManagedProcess:
     def pid(self) -> int | None:
         return self.proc.pid if self.proc else None
 
+    @property
+    def running(self) -> bool:
+        """True while the current process runs and is not being stopped."""
+        return self.proc is not None and self.proc.returncode is None and not self.stopping
+
     async def start(self) -> None:
         """Start the process (again)."""
-        env = {**os.environ, **self.spec.env}
+        env = {**os.environ, **self.spec.env, **child_env()}
         self.proc = await asyncio.create_subprocess_exec(
             *self.spec.argv,
             stdin=asyncio.subprocess.DEVNULL,
@@ -103,6 +115,17 @@ class ManagedProcess:
             text = line.decode(errors="replace").rstrip("\n")
             self.tail.append(text)
             self.sink(self.spec.service, text)
+
+    def kill_frozen(self, pid: int) -> bool:
+        """Kill process `pid` if it is still the current one (SIGKILL: a stopped process
+        cannot handle SIGTERM); `supervise` then restarts it by policy."""
+        proc = self.proc
+        if proc is None or proc.pid != pid or proc.returncode is not None or self.stopping:
+            return False
+        self.freezes += 1
+        with contextlib.suppress(ProcessLookupError):
+            proc.kill()
+        return True
 
     async def supervise(self) -> None:
         """Wait for exits and restart by policy until stopped or given up (sets `failed`)."""

@@ -4,8 +4,11 @@ Order: the router; the monitor when recording; the world; every agent's services
 start waits until the service's liveliness token appears (so it is ready), then the run
 goes on until the world announces `RunFinished`, a service fails beyond its restart
 policy, the wall-clock limit passes, or the user presses Ctrl-C. Everything is stopped in
-reverse order. Before the world starts, the launcher publishes what it starts and with
-which arguments (`RunLaunched`), so that a recording says how to build a service again.
+reverse order. Meanwhile a watchdog hears every service's heartbeat and kills one that
+froze (`cbdi.launcher.watch`), to be restarted by policy; and should the launcher die,
+even by SIGKILL, its children die with it (`cbdi.runtime.parent`). Before the world
+starts, the launcher publishes what it starts and with which arguments (`RunLaunched`),
+so that a recording says how to build a service again.
 
 Meanwhile it listens to every planner (`cbdi.tally`): the summary's `planner` holds each
 BDI agent's plans, replans, forecast-triggered repairs and search rounds, and the total.
@@ -28,9 +31,11 @@ from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish, re
 from cbdi.bus.base import Bus
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
+from cbdi.launcher.liveness import Watchdog
 from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy, console_script
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import plan_services
+from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
 from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
@@ -52,6 +57,10 @@ class LaunchOptions:
     # Start these services (`robot1/scheduler`) this many wall seconds late: any start
     # order must work (the world's start barrier waits for every member).
     delays: dict[str, float] = field(default_factory=dict)
+    # Every service beats every `heartbeat` wall seconds (0: no heartbeats, no watchdog);
+    # one silent for `freeze_limit` seconds is frozen: reported, killed, restarted by policy.
+    heartbeat: float = 0.5
+    freeze_limit: float = 2.0
 
 
 @dataclass
@@ -66,6 +75,7 @@ class RunSummary:
     wall_time: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
     restarts: dict[str, int] = field(default_factory=dict)
+    freezes: dict[str, int] = field(default_factory=dict)  # processes killed as frozen
     exit_codes: dict[str, list[int]] = field(default_factory=dict)
     planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
     # Per agent: `actions` it asked the world for and the simulated time of the first.
@@ -89,15 +99,22 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _specs(scenario: Scenario, endpoint: str, record: str = "") -> list[ProcessSpec]:
+# After the run ended the world still answers (the launcher asks for its statistics)
+# this long at most, should the launcher not stop it (wall seconds). In the environment,
+# not the arguments: those are the ones `cbdi compose` gives, whose world stays.
+WORLD_LINGER = 30.0
+
+
+def _specs(
+    scenario: Scenario, endpoint: str, record: str = "", heartbeat: float = 0.5
+) -> list[ProcessSpec]:
+    beat = {"CBDI_HEARTBEAT": str(heartbeat)}
     # A fixed hash seed: no decision may hang on the order of a set of strings.
-    env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0"}
+    env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **beat}
+    own = {"router": beat, "world": {**env, "CBDI_LINGER": str(WORLD_LINGER)}}
     return [
         ProcessSpec.of(
-            p.service,
-            console_script(p.script, p.module),
-            p.args,
-            {} if p.service == "router" else env,
+            p.service, console_script(p.script, p.module), p.args, own.get(p.service, env)
         )
         for p in plan_services(scenario, endpoint, record)
     ]
@@ -128,7 +145,7 @@ async def launch(
     """Run `scenario` to its end and return the summary; never leaves a child behind."""
     summary = RunSummary(scenario=scenario.name)
     endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
-    specs = _specs(scenario, endpoint, opts.record)
+    specs = _specs(scenario, endpoint, opts.record, opts.heartbeat)
     procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
@@ -149,6 +166,8 @@ async def launch(
         summary.result = "failed"
         summary.reason = "; ".join(str(e) or type(e).__name__ for e in group.exceptions)
     finally:
+        for proc in procs:  # from now on an exit (the world's linger ends) is no failure
+            proc.stopping = True
         if bus is not None:
             await _collect_stats(bus, summary)
         for proc in reversed(procs):
@@ -159,6 +178,7 @@ async def launch(
     summary.planner = planners.summary()
     for proc in procs:
         summary.restarts[proc.spec.service] = proc.restarts
+        summary.freezes[proc.spec.service] = proc.freezes
         summary.exit_codes[proc.spec.service] = proc.exit_codes
     return summary
 
@@ -199,6 +219,10 @@ async def _start_all(
         from cbdi.view import text_view
 
         tg.create_task(text_view(bus, sys.stdout))
+    if opts.heartbeat > 0:
+        dog = Watchdog(opts.freeze_limit, TICK, opts.startup_timeout)
+        tg.create_task(watch_heartbeats(bus, dog))
+        tg.create_task(watch_processes(bus, dog, procs))
     await _wait_alive(live, [router], opts)
     await _router_is_ours(router, endpoint, opts)
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.

@@ -38,6 +38,7 @@ class Log:
         self.threshold = _LEVELS[level]
         self.fmt = fmt
         self.stream = stream or sys.stderr
+        self.lost = 0  # lines that could not be written
 
     def event(self, level: str, event: str, **fields: Any) -> None:
         """Write one event line if `level` passes the threshold."""
@@ -50,8 +51,11 @@ class Log:
             line = json.dumps(record, default=str)
         else:
             line = " ".join(f"{k}={_kv(v)}" for k, v in record.items())
-        self.stream.write(line + "\n")
-        self.stream.flush()
+        try:
+            self.stream.write(line + "\n")
+            self.stream.flush()
+        except (OSError, ValueError):  # nobody reads (the supervisor died): lose the line,
+            self.lost += 1  # not the service
 
     def debug(self, event: str, **fields: Any) -> None:
         self.event("debug", event, **fields)

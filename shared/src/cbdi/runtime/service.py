@@ -2,8 +2,10 @@
 
 It runs on uvloop, opens the bus, lets `main` declare its subscriptions and start its
 tasks in the one TaskGroup, then declares the service's liveliness token (so "alive"
-means "ready to receive"), reports bad input on the service's error stream, and shuts
-down cleanly on SIGTERM/SIGINT, closing the bus in any case.
+means "ready to receive") and starts its heartbeat (so a frozen loop shows), reports bad
+input on the service's error stream, and shuts down cleanly on SIGTERM/SIGINT, closing
+the bus in any case. Started by a supervisor, it also stops when that one dies
+(`cbdi.runtime.parent`).
 """
 
 from __future__ import annotations
@@ -11,6 +13,9 @@ from __future__ import annotations
 import asyncio
 import collections
 import dataclasses
+import itertools
+import math
+import os
 import signal
 import traceback
 from collections.abc import Awaitable, Callable, Coroutine
@@ -22,10 +27,12 @@ import uvloop
 from cbdi import keys
 from cbdi.bus.base import Bus
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig, open_bus
+from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
 from cbdi.runtime.log import Log
+from cbdi.runtime.parent import ParentGuard, guard_parent
 from cbdi.wire.base import encode
-from cbdi.wire.common import ErrorReport
+from cbdi.wire.common import ErrorReport, Heartbeat
 
 __all__ = ["ServiceContext", "ServiceSettings", "run_service"]
 
@@ -44,6 +51,9 @@ class ServiceSettings:
     connect_timeout: float = field(default=10.0, metadata={"help": "seconds to wait for a router"})
     log_level: str = field(default="info", metadata={"help": "debug, info, warning or error"})
     log_format: str = field(default="kv", metadata={"help": "kv or json"})
+    heartbeat: float = field(
+        default=0.5, metadata={"help": "wall seconds between heartbeats (0: none)"}
+    )
 
     def bus_config(self) -> BusConfig:
         """Return the bus part of these settings."""
@@ -127,15 +137,23 @@ ServiceMain = Callable[[ServiceContext], Awaitable[None]]
 
 def run_service(settings: ServiceSettings, service: str, main: ServiceMain) -> int:
     """Run a service to completion on uvloop and return its exit code."""
+    guard = guard_parent()
     try:
         log = Log(service, level=settings.log_level, fmt=settings.log_format)
+        if not (math.isfinite(settings.heartbeat) and settings.heartbeat >= 0):
+            raise ValueError(f"heartbeat must be a finite number >= 0, got {settings.heartbeat}")
     except ValueError as exc:
         print(f"{service}: bad settings: {exc}")
         return 2
-    return uvloop.run(_run(settings, service, main, log))
+    if guard.orphaned:  # the supervisor died before the guard was set: no signal will come
+        log.warning("orphaned", parent=guard.parent)
+        return 1
+    return uvloop.run(_run(settings, service, main, log, guard))
 
 
-async def _run(settings: ServiceSettings, service: str, main: ServiceMain, log: Log) -> int:
+async def _run(
+    settings: ServiceSettings, service: str, main: ServiceMain, log: Log, guard: ParentGuard
+) -> int:
     try:
         bus = await open_bus(settings.bus_config())
     except CbdiError as exc:
@@ -143,10 +161,17 @@ async def _run(settings: ServiceSettings, service: str, main: ServiceMain, log: 
         return 2
     ctx = ServiceContext(service, bus, log, settings)
     loop = asyncio.get_running_loop()
+
+    def stop() -> None:
+        guard.stop_hard_later()  # first: nothing below may keep an orphan alive
+        ctx.stop()
+        if guard.orphaned:
+            log.warning("orphaned", parent=guard.parent, grace=guard.grace)
+
     for sig in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(sig, ctx.stop)
+        loop.add_signal_handler(sig, stop)
     try:
-        await _supervise(ctx, main)
+        await _supervise(ctx, main, settings.heartbeat)
     except* CbdiError as group:
         for err in group.exceptions:
             log.error("service_failed", error=str(err))
@@ -157,12 +182,14 @@ async def _run(settings: ServiceSettings, service: str, main: ServiceMain, log: 
         await ctx._flush_reports()
         await bus.close()
     for key, count in sorted(bus.sent.items()):
-        log.info("sent", key=key, count=count)
+        if not keys.is_heartbeat(key):  # not recorded: counted in `stopped` instead
+            log.info("sent", key=key, count=count)
     log.info("stopped", exit_code=ctx.exit_code, **_counter_fields(ctx))
     return ctx.exit_code
 
 
-async def _supervise(ctx: ServiceContext, main: ServiceMain) -> None:
+async def _supervise(ctx: ServiceContext, main: ServiceMain, heartbeat: float = 0.0) -> None:
+    """Run `main` in the service's TaskGroup until stopped; beat every `heartbeat` s."""
     try:
         async with asyncio.TaskGroup() as tg:
             ctx._tg = tg
@@ -174,8 +201,20 @@ async def _supervise(ctx: ServiceContext, main: ServiceMain) -> None:
             await asyncio.sleep(0)
             await ctx.bus.declare_token(keys.alive(ctx.service))
             ctx.log.info("ready", alive=keys.alive(ctx.service))
+            if heartbeat > 0:
+                tg.create_task(_beat(ctx, heartbeat, WallClock()), name="heartbeat")
     except* _Stop:
         pass
+
+
+async def _beat(ctx: ServiceContext, period: float, clock: Clock) -> None:
+    """Send a heartbeat every `period` s while this loop turns (dropped under congestion:
+    a late one is worth nothing)."""
+    pid, key = os.getpid(), keys.heartbeat(ctx.service)
+    for beat in itertools.count():
+        await ctx.bus.publish(key, encode(Heartbeat(service=ctx.service, pid=pid, beat=beat)))
+        ctx.counters["heartbeats"] += 1
+        await clock.sleep(period)
 
 
 def _counter_fields(ctx: ServiceContext) -> dict[str, int]:

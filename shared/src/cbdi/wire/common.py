@@ -7,14 +7,16 @@ from typing import Annotated
 import msgspec
 
 from cbdi.wire.base import Message
-from cbdi.wire.fields import Count, Finite, Id, Many, Symbol, Text
+from cbdi.wire.fields import Count, Finite, Id, Many, NonNegative, Symbol, Text
 
 __all__ = [
     "ErrorReply",
     "ErrorReport",
+    "Heartbeat",
     "Liveliness",
     "RunFinished",
     "RunLaunched",
+    "ServiceFrozen",
     "ServiceHealth",
 ]
 
@@ -76,3 +78,26 @@ class ServiceHealth(Message, frozen=True, tag="cbdi.ServiceHealth/1"):
     service: Text
     alive: bool
     alive_now: Many[Text]
+
+
+class Heartbeat(Message, frozen=True, tag="cbdi.Heartbeat/1"):
+    """Say that a service's event loop still turns: sent every `--heartbeat` wall seconds.
+
+    From a task of the loop, so a blocked loop or a stopped process falls silent while
+    its Zenoh session (and liveliness token) may live on. Wall-clock by nature, it
+    never enters a lockstep epoch. `pid` tells one start of a service from the next.
+    """
+
+    service: Symbol
+    pid: Count
+    beat: Count
+
+
+class ServiceFrozen(Message, frozen=True, tag="cbdi.ServiceFrozen/1"):
+    """The launcher's word that a service sent no heartbeat for `silent_for` wall seconds
+    (more than its `limit`): it is killed, and its restart policy decides what next."""
+
+    service: Symbol
+    pid: Count
+    silent_for: NonNegative
+    limit: NonNegative

@@ -13,6 +13,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from cbdi.runtime.parent import die_with_parent
 from cbdi_planner.errors import SearchTimeout, Unsolvable
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl.ast import Domain, Problem
@@ -85,6 +86,9 @@ def _kairos(domain_file: Path, problem: Problem, seconds: float) -> Plan:
                 capture_output=True,
                 text=True,
                 timeout=seconds + 10,
+                # Pass the parent-death signal on: kairos ends with this planner (its
+                # thread), whatever kills it.
+                preexec_fn=die_with_parent,
             )
         except subprocess.TimeoutExpired:
             raise SearchTimeout(f"kairos found no plan within {seconds:g} s") from None

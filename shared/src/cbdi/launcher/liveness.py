@@ -1,0 +1,93 @@
+"""Which services are frozen: the launcher's watchdog over heartbeats, a pure core.
+
+A service's liveliness token says its Zenoh session lives; Zenoh keeps that session up
+from its own threads, so a service whose event loop is blocked keeps its token forever,
+and a stopped process (SIGSTOP) keeps it until the router's lease runs out (10 s by
+default). Its heartbeat comes from a task of its event loop (`cbdi.runtime.service`),
+so it stops with the loop. A service is frozen when its current process, once heard,
+has been silent so long that, checked every `tick` seconds, it is found within `limit`
+seconds of its last heartbeat (so within `limit` of freezing). A planner searching in
+worker threads keeps its loop free and beating, so it is never taken for frozen.
+
+Two silences are not a service's fault, and judge nobody:
+- the watchdog itself was late by more than half the limit (its own loop starved on a
+  loaded machine): what it did not hear meanwhile may be waiting in its queue, so every
+  clock restarts;
+- every watched service fell silent at once: the bus (its router) is the one frozen, so
+  only the router is judged.
+
+The shell (`cbdi.launcher.watch`) feeds it heartbeats and checks; it never reads a clock.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+__all__ = ["Frozen", "Watchdog"]
+
+ROUTER = "router"
+
+
+@dataclass(frozen=True)
+class Frozen:
+    """The decision that process `pid` of `service` is frozen: silent for `silent_for` s."""
+
+    service: str
+    pid: int
+    silent_for: float
+
+
+class Watchdog:
+    """Judge services frozen within `limit` seconds of their process's last heartbeat,
+    checked every `tick` seconds."""
+
+    def __init__(self, limit: float, tick: float, startup: float = 30.0) -> None:
+        if not (math.isfinite(limit) and math.isfinite(tick) and 0 < tick < limit):
+            raise ValueError(f"need 0 < tick < limit (finite), got tick {tick}, limit {limit}")
+        self.limit = limit
+        self.tick = tick
+        self.startup = max(startup, limit)
+        self._seen: dict[tuple[str, int], float] = {}  # process -> first check it ran at
+        self._heard: dict[str, tuple[int, float]] = {}  # service -> (pid, last beat)
+        self._judged: set[tuple[str, int]] = set()
+        self._checked: float | None = None
+
+    def beat(self, service: str, pid: int, now: float) -> None:
+        """Note a heartbeat of process `pid` of `service` heard at `now`."""
+        self._heard[service] = (pid, now)
+
+    def check(self, now: float, running: Mapping[str, int]) -> list[Frozen]:
+        """Return the services of `running` (service -> current pid) newly judged frozen.
+
+        A service is watched once its current process beat; one that never beats is
+        judged `startup` seconds after it was first seen running. Each process is judged
+        once.
+        """
+        late = self._checked is not None and now - self._checked > self.limit / 2
+        self._checked = now
+        if late:
+            self._heard = {s: (pid, now) for s, (pid, _) in self._heard.items()}
+            self._seen = {p: now for p in self._seen}
+            return []
+        for process in running.items():
+            self._seen.setdefault(process, now)
+        watched = {
+            s: now - self._heard[s][1]
+            for s, pid in running.items()
+            if s in self._heard and self._heard[s][0] == pid
+        }
+        silent = {s: t for s, t in watched.items() if t > self.limit - self.tick}
+        for s, pid in running.items():  # never heard: frozen while starting (or mute)
+            if s not in watched and now - self._seen[(s, pid)] > self.startup:
+                silent[s] = now - self._seen[(s, pid)]
+        if len(watched) > 1 and len(silent) == len(watched):
+            silent = {s: t for s, t in silent.items() if s == ROUTER}
+        found = [
+            Frozen(s, running[s], round(t, 3))
+            for s, t in sorted(silent.items())
+            if (s, running[s]) not in self._judged
+        ]
+        self._judged.update((f.service, f.pid) for f in found)
+        return found

@@ -1,0 +1,64 @@
+"""The launcher's liveness watchdog: heartbeats in, frozen services reported and killed.
+
+The decisions are `cbdi.launcher.liveness.Watchdog`'s; this shell feeds it what it
+hears on `cbdi/heartbeat/**` with the wall clock, and acts on each `Frozen`: a log line
+(`frozen service=... pid=... silent_for=...`), a `ServiceFrozen` message on
+`cbdi/launcher/health` (which the monitor records), and SIGKILL, after which the
+service's supervisor restarts it by its restart policy, as after a crash.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Sequence
+
+from cbdi import keys
+from cbdi.bus import LogSink, messages, publish
+from cbdi.bus.base import Bus
+from cbdi.clock import Clock, WallClock
+from cbdi.launcher.liveness import Frozen, Watchdog
+from cbdi.launcher.process import ManagedProcess
+from cbdi.wire.common import Heartbeat, ServiceFrozen
+
+__all__ = ["TICK", "watch_heartbeats", "watch_processes"]
+
+TICK = 0.1  # seconds between checks: a freeze is found within the limit of the last beat
+
+
+async def watch_heartbeats(bus: Bus, dog: Watchdog, clock: Clock | None = None) -> None:
+    """Note every heartbeat heard on the bus, at the time it is heard."""
+    clock = clock or WallClock()
+    beats: AsyncIterator[tuple[str, Heartbeat]] = messages(
+        bus, keys.HEARTBEAT_ALL, Heartbeat, LogSink()
+    )
+    async for _, beat in beats:
+        dog.beat(beat.service, beat.pid, clock.now())
+
+
+async def watch_processes(
+    bus: Bus,
+    dog: Watchdog,
+    procs: Sequence[ManagedProcess],
+    clock: Clock | None = None,
+) -> None:
+    """Check the running processes every tick; report and kill each one judged frozen."""
+    clock = clock or WallClock()
+    by_service = {p.spec.service: p for p in procs}
+    while True:
+        await clock.sleep(dog.tick)
+        running = {p.spec.service: p.pid for p in procs if p.pid and p.running}
+        for frozen in dog.check(clock.now(), running):
+            await _act(bus, dog, by_service[frozen.service], frozen)
+
+
+async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen) -> None:
+    if not proc.kill_frozen(frozen.pid):
+        return
+    proc.sink(
+        "launcher",
+        f"frozen service={frozen.service} pid={frozen.pid} silent_for={frozen.silent_for:.2f}"
+        f" limit={dog.limit:g} action=kill",
+    )
+    report = ServiceFrozen(
+        service=frozen.service, pid=frozen.pid, silent_for=frozen.silent_for, limit=dog.limit
+    )
+    await publish(bus, keys.launcher_stream("health"), report, block=True)

@@ -1,0 +1,182 @@
+"""Faults of a real run (`cbdi up`, real processes, real Zenoh): no orphans, no silent freeze.
+
+- SIGKILL of `cbdi up` leaves no process of the run behind: every service got the
+  parent-death signal from Linux (`cbdi.runtime.parent`).
+- A service stopped with SIGSTOP is found frozen within the freeze limit (its heartbeat
+  stops), reported in the launcher's log and on the bus (recorded by the monitor), killed
+  and restarted; the run still recycles everything.
+- A world whose run ended stops on its own after `--linger`, launcher or not.
+
+Timings are generous bounds, not measurements: these pass on a loaded machine.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from tests_support import CBDI, REPO, free_port, wait_for
+
+pytestmark = pytest.mark.e2e
+
+SERVICES = ("router", "world", "robot1/planner", "robot1/scheduler", "robot1/executor")
+STARTED = re.compile(r"started service=(\S+) pid=(\d+)")
+
+
+def _up(log: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [CBDI, "up", "paper-7x7", "--json", *args],
+        stdout=subprocess.PIPE,
+        stderr=log.open("w"),
+        text=True,
+        cwd=REPO,
+        stdin=subprocess.DEVNULL,
+        env={**os.environ, **(env or {})},
+        start_new_session=True,
+    )
+
+
+def _started(log: Path) -> dict[str, int]:
+    """Return each service's latest pid, from the launcher's log."""
+    return {s: int(p) for s, p in STARTED.findall(log.read_text())}
+
+
+def _gone(pid: int) -> bool:
+    """True once `pid` is no process, or a zombie nobody reaped yet."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return True
+
+
+def _of_run(port: int) -> list[int]:
+    """Return the live processes naming the run's router port (argv or CBDI_CONNECT)."""
+    mark = f"127.0.0.1:{port}".encode()
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit() or int(entry) == os.getpid():
+            continue
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                text = f.read()
+            with open(f"/proc/{entry}/environ", "rb") as f:
+                text += f.read()
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue
+        if (mark in text or f"--port\0{port}\0".encode() in text) and not _gone(int(entry)):
+            found.append(int(entry))
+    return found
+
+
+def _kill_all(pids: list[int]) -> None:
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def test_sigkill_of_cbdi_up_leaves_no_process_behind(tmp_path: Path) -> None:
+    port = free_port()
+    log = tmp_path / "up.log"
+    up = _up(log, "--port", str(port), "--quiet")
+    try:
+        wait_for(
+            lambda: set(_started(log)) == set(SERVICES), timeout=120, what="every service started"
+        )
+        children = list(_started(log).values())
+        assert len(_of_run(port)) >= len(children)  # the run's processes can be found
+        up.send_signal(signal.SIGKILL)
+        up.wait(10)
+        killed = time.monotonic()
+        wait_for(
+            lambda: all(_gone(p) for p in children) and not _of_run(port),
+            timeout=15,
+            what=f"the run's processes to stop (left: {_of_run(port)})",
+        )
+        print(f"no process left {time.monotonic() - killed:.2f} s after SIGKILL of cbdi up")
+    finally:
+        up.kill()
+        _kill_all(_of_run(port))
+
+
+def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
+    tmp_path: Path,
+) -> None:
+    log, record = tmp_path / "up.log", tmp_path / "run.mcap"
+    # The restarted planner missed the epoch the world waits for: a short ack timeout keeps
+    # that stall short (resynchronising at once is the run's recovery, not the watchdog's).
+    up = _up(log, "--record", str(record), env={"CBDI_ACK_TIMEOUT": "10"})
+    planner = 0
+    try:
+        # Freeze a planner at work: ready (so heard), the robot acting.
+        wait_for(
+            lambda: (
+                re.search(r"robot1/planner .*event=ready", log.read_text())
+                and "event=act " in log.read_text()
+            ),
+            timeout=120,
+            what="the robot to act",
+        )
+        planner = _started(log)["robot1/planner"]
+        os.kill(planner, signal.SIGSTOP)
+        stopped = time.monotonic()
+        frozen_line = "frozen service=robot1/planner"
+        wait_for(lambda: frozen_line in log.read_text(), timeout=20, what="the freeze reported")
+        detected = time.monotonic() - stopped
+        time.sleep(max(0.0, 5.0 - (time.monotonic() - stopped)))
+        with contextlib.suppress(ProcessLookupError):  # killed as frozen by now, normally
+            os.kill(planner, signal.SIGCONT)
+        out, _ = up.communicate(timeout=240)
+    finally:
+        up.kill()
+        if planner:  # a stopped process takes no SIGTERM, not even its parent-death one
+            _kill_all([planner])
+    text = log.read_text()
+    summary = json.loads(out)
+    print(f"frozen planner detected {detected:.2f} s after SIGSTOP")
+    assert detected < 6.0, text  # 2 s limit; generous on a loaded machine
+    assert re.search(rf"frozen service=robot1/planner pid={planner} silent_for=\S+", text)
+    assert "restarting service=robot1/planner exit_code=-9 restart=1" in text
+    assert up.returncode == 0, text[-3000:]
+    assert summary["result"] == "done" and summary["stats"]["litter_recycled"] == 3
+    frozen = {s: n for s, n in summary["freezes"].items() if n}
+    assert frozen == {"robot1/planner": 1}
+    inspected = subprocess.run(
+        [CBDI, "inspect", str(record), "--json"], capture_output=True, text=True, cwd=REPO
+    )
+    assert "cbdi/launcher/health" in inspected.stdout, inspected.stdout[-2000:]
+    assert "cbdi/heartbeat/" not in inspected.stdout  # heartbeats are not recorded
+
+
+def test_a_finished_world_stops_after_lingering(tmp_path: Path, router: str, spawn: object) -> None:
+    corridor = str(REPO / "domains/recycling/maps/corridor-6x3.toml")
+    world = spawn(  # type: ignore[operator]
+        "world",
+        "cbdi-world",
+        "--map",
+        corridor,
+        "--agent",
+        "robot1",
+        "--speed",
+        "20",
+        "--max-time",
+        "1",
+        "--no-stop-when-done",
+        "--wait-agents",
+        "0",
+        "--linger",
+        "1",
+        env={"CBDI_CONNECT": router},
+    )
+    wait_for(lambda: not world.alive(), timeout=60, what="the world to stop by itself")
+    assert world.popen.returncode == 0
+    assert "event=finished reason=time_limit" in world.output()
+    assert "event=lingered" in world.output()

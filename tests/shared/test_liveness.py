@@ -1,0 +1,92 @@
+"""The launcher's watchdog: who is frozen, from heartbeats and the checks' times alone."""
+
+from __future__ import annotations
+
+import pytest
+
+from cbdi.launcher.liveness import Frozen, Watchdog
+
+RUN = {"router": 10, "world": 11, "robot1/planner": 12}
+
+
+def _beating(dog: Watchdog, until: float, services: dict[str, int], step: float = 0.5) -> None:
+    t = 0.0
+    while t <= until:
+        for service, pid in services.items():
+            dog.beat(service, pid, t)
+        dog.check(t, RUN)
+        t += step
+
+
+def _checks(
+    dog: Watchdog, start: float, end: float, running: dict[str, int] = RUN, beating: int = 2
+) -> list[Frozen]:
+    """Check every tick from `start` to `end`, the first `beating` services of `running`
+    beating all along; return every verdict."""
+    found: list[Frozen] = []
+    t = start
+    while t <= end + 1e-9:
+        for service, pid in list(running.items())[:beating]:
+            dog.beat(service, pid, t)
+        found += dog.check(t, running)
+        t = round(t + 0.1, 3)
+    return found
+
+
+def test_a_silent_service_is_judged_frozen_once_within_the_limit() -> None:
+    dog = Watchdog(2.0, 0.1)
+    _beating(dog, 3.0, RUN)
+    found = _checks(dog, 3.1, 8.0)
+    assert [(f.service, f.pid) for f in found] == [("robot1/planner", 12)]
+    assert 1.9 <= found[0].silent_for <= 2.0  # found within the limit of its last beat
+
+
+def test_beating_services_are_never_frozen() -> None:
+    dog = Watchdog(2.0, 0.1)
+    _beating(dog, 60.0, RUN)
+    assert dog.check(60.1, RUN) == []
+
+
+def test_a_restarted_service_is_watched_once_its_new_process_beats() -> None:
+    dog = Watchdog(2.0, 0.1)
+    _beating(dog, 3.0, RUN)
+    restarted = {**RUN, "robot1/planner": 13}
+    assert _checks(dog, 3.1, 9.0, restarted) == []  # the old pid's silence is not its
+    dog.beat("robot1/planner", 13, 9.0)
+    found = _checks(dog, 9.1, 12.0, restarted)
+    assert [(f.service, f.pid) for f in found] == [("robot1/planner", 13)]
+
+
+def test_a_late_watchdog_judges_nobody_and_restarts_every_clock() -> None:
+    dog = Watchdog(2.0, 0.1)
+    _beating(dog, 3.0, RUN)
+    assert dog.check(10.0, RUN) == []  # its own loop stalled 7 s: the beats may be queued
+    assert dog.check(10.1, RUN) == []
+
+
+def test_when_everyone_falls_silent_only_the_router_is_judged() -> None:
+    dog = Watchdog(2.0, 0.1)
+    _beating(dog, 3.0, RUN)
+    found: list[Frozen] = []
+    for i in range(1, 40):
+        found += dog.check(3.0 + i * 0.1, RUN)
+    assert [f.service for f in found] == ["router"]
+    without_router = {k: v for k, v in RUN.items() if k != "router"}
+    dog = Watchdog(2.0, 0.1)
+    _beating(dog, 3.0, RUN)
+    assert all(dog.check(3.0 + i * 0.1, without_router) == [] for i in range(1, 40))
+
+
+@pytest.mark.parametrize(("limit", "tick"), [(0.0, 0.1), (2.0, 2.0), (float("inf"), 0.1)])
+def test_a_limit_the_checks_cannot_meet_is_refused(limit: float, tick: float) -> None:
+    with pytest.raises(ValueError, match="tick"):
+        Watchdog(limit, tick)
+
+
+def test_a_process_that_never_beats_is_judged_after_the_startup_limit() -> None:
+    dog = Watchdog(2.0, 0.1, startup=5.0)
+    _beating(dog, 3.0, RUN)
+    restarted = {**RUN, "robot1/planner": 13}  # frozen while starting: never a beat
+    found = _checks(dog, 3.1, 12.0, restarted)
+    assert [(f.service, f.pid) for f in found] == [("robot1/planner", 13)]
+    assert 5.0 < found[0].silent_for <= 5.2
