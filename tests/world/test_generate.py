@@ -66,3 +66,7 @@ def test_the_command_writes_a_map_and_a_scenario(
     assert parse_map(out.read_text()).name == "generated-4"
     assert main(["--seed", "4", "--size", "2x2"]) == 2
     assert "size 2x2" in capsys.readouterr().err
+    assert main(["--seed", "4", "--size", "9y9"]) == 2
+    assert "expected WIDTHxHEIGHT" in capsys.readouterr().err
+    assert main(["--seed", "4", "--size", "4x4", "--litter", "30"]) == 2
+    assert "no room for 30 litter items" in capsys.readouterr().err

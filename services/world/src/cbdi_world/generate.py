@@ -201,6 +201,8 @@ def generate_map(seed: int, recipe: Recipe | None = None) -> str:
     if len(starts) < r.agents:
         raise WorldError(f"seed {seed}: no room for {r.agents} agents off the people's loops")
     rest = [c for c in free if c not in starts and c not in {loop[0] for loop in loops}]
+    if len(rest) < r.litter:
+        raise WorldError(f"seed {seed}: no room for {r.litter} litter items ({len(rest)} cells)")
     litter = rest[: r.litter]
     known = r.litter if r.known_litter < 0 else r.known_litter
     rows = []
@@ -264,6 +266,13 @@ def _default_agent_file() -> Path:
     return find_scenario("paper-7x7").parent.parent / "agents" / "recycler.toml"
 
 
+def _size(text: str) -> tuple[int, int]:
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.isdigit() for p in parts):
+        raise ValueError(f"size {text!r}: expected WIDTHxHEIGHT, for example 9x9")
+    return int(parts[0]), int(parts[1])
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="cbdi map",
@@ -288,7 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--agent-file", type=Path, help="the robots' agent file (default: recycler)")
     args = p.parse_args(argv)
     try:
-        w, h = (int(v) for v in args.size.lower().split("x"))
+        w, h = _size(args.size)
         recipe = Recipe(
             width=w,
             height=h,
