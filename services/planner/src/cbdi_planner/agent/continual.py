@@ -93,6 +93,7 @@ class Search:
     purpose: str
     request_id: str
     repairs: Line | None = None  # the executing line this search continues from
+    blocked: bool | None = None  # a failed search: blocked by something that moves?
 
 
 class ContinualPlanner:
@@ -326,7 +327,12 @@ class ContinualPlanner:
         if expansions is not None:
             per_round = bound.expansions or expansions
             bound = RoundBound(None, max(1, min(per_round, expansions)), bound.plan_size)
-        return search.thread.step(bound)
+        events = search.thread.step(bound)
+        request = self.request
+        if request is not None and any(isinstance(e, SearchFailed) for e in events):
+            # Tell blocked from unsolvable here, in the worker thread: it grounds the task.
+            search.blocked = self._blocked(request.goal)
+        return events
 
     def after_round(self, search: Search, events: list[Event]) -> list[Message]:
         """Turn a round's events into messages; drop a search replaced meanwhile."""
@@ -377,11 +383,17 @@ class ContinualPlanner:
             self.log("repair_failed", plan=search.line.plan_id, reason=reason)
             return []  # the executing plan goes on; execution reports if it fails
         goal = self.request.goal if self.request is not None else []
-        return [self._failure(search.request_id, reason, goal)]
+        return [self._failure(search.request_id, reason, goal, search.blocked)]
 
-    def _failure(self, request_id: str, reason: str, goal: list[list[str]]) -> SearchStatus:
+    def _blocked(self, goal: list[list[str]]) -> bool:
+        return bool(goal) and self.transients.blocked(self.domain, self.beliefs, goal)
+
+    def _failure(
+        self, request_id: str, reason: str, goal: list[list[str]], blocked: bool | None = None
+    ) -> SearchStatus:
         """A failed search, `blocked` if the goal is reachable once moving things move."""
-        blocked = bool(goal) and self.transients.blocked(self.domain, self.beliefs, goal)
+        if blocked is None:
+            blocked = self._blocked(goal)
         if blocked:
             reason += " (blocked by something that moves: waiting for it)"
         return SearchStatus(
