@@ -90,3 +90,22 @@ def test_a_process_that_never_beats_is_judged_after_the_startup_limit() -> None:
     found = _checks(dog, 3.1, 12.0, restarted)
     assert [(f.service, f.pid) for f in found] == [("robot1/planner", 13)]
     assert 5.0 < found[0].silent_for <= 5.2
+
+
+def test_a_freeze_is_reported_at_the_limit_and_killed_at_the_kill_limit() -> None:
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, RUN)
+    found = _checks(dog, 3.1, 20.0)
+    assert [(f.service, f.kill) for f in found] == [
+        ("robot1/planner", False),
+        ("robot1/planner", True),
+    ]
+    assert 1.9 <= found[0].silent_for <= 2.0 and 9.9 <= found[1].silent_for <= 10.0
+    # Starved for a moment, not frozen: reported once, beating again, never killed.
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, RUN)
+    found = _checks(dog, 3.1, 6.0)
+    found += _checks(dog, 6.1, 20.0, beating=3)  # it beats again
+    assert [f.kill for f in found] == [False]
+    with pytest.raises(ValueError, match="kill limit"):
+        Watchdog(2.0, 0.1, kill_after=1.0)

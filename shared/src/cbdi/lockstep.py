@@ -110,6 +110,9 @@ class EpochGate:
         self.changed = asyncio.Condition()
         # The world's lockstep members: what others send is let through at every gate.
         self.members: set[str] = set()
+        # The first epoch this component takes part in (a restarted one joins late): acks
+        # of epochs before it went out before it listened, so they are not waited for.
+        self.joined = 0
 
     def _of(self, sender: str) -> _Sender:
         return self.senders.setdefault(sender, _Sender())
@@ -145,7 +148,7 @@ class EpochGate:
 
     def met(self, need: Need) -> bool:
         """Whether `need` is met: its ack (or world percepts) and all it covers are here."""
-        if need.epoch < 0:
+        if need.epoch < 0 or need.epoch < self.joined:
             return True
         s = self._of(need.sender)
         if need.sender == WORLD:
@@ -301,6 +304,7 @@ class Lockstep:
             if self.keep_ticks or not isinstance(e.message, Tick):
                 await self.gate.put(e)
         self.early = []
+        self.gate.joined = tick.epoch
         self.start(tick.epoch)
         return []
 

@@ -130,7 +130,15 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         type=float,
         default=2.0,
         metavar="SECONDS",
-        help="a service silent this long is frozen: reported, killed, restarted by policy",
+        help="a service silent this long is frozen: reported (default 2)",
+    )
+    p.add_argument(
+        "--freeze-kill",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="a frozen service still silent this long is killed and restarted by policy "
+        "(default 10; at least --freeze-limit)",
     )
     p.add_argument(
         "--record",
@@ -241,6 +249,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         delays = _delays(args.delay, scenario)
         _check_liveness(args.heartbeat, args.freeze_limit)
+        if not (math.isfinite(args.freeze_kill) and args.freeze_kill >= args.freeze_limit):
+            raise ConfigError(
+                "--freeze-kill", str(args.freeze_kill), "must be finite and >= --freeze-limit"
+            )
     except ConfigError as exc:
         print(f"cbdi up: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -255,6 +267,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         record=args.record,
         heartbeat=args.heartbeat,
         freeze_limit=args.freeze_limit,
+        freeze_kill=args.freeze_kill,
     )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]

@@ -6,7 +6,9 @@ and a stopped process (SIGSTOP) keeps it until the router's lease runs out (10 s
 default). Its heartbeat comes from a task of its event loop (`cbdi.runtime.service`),
 so it stops with the loop. A service is frozen when its current process, once heard,
 has been silent so long that, checked every `tick` seconds, it is found within `limit`
-seconds of its last heartbeat (so within `limit` of freezing). A planner searching in
+seconds of its last heartbeat (so within `limit` of freezing): reported. Still silent at
+`kill_after` seconds, it is killed (and restarted by policy): a service merely starved of
+the CPU for a moment on a loaded machine is reported, not killed. A planner searching in
 worker threads keeps its loop free and beating, so it is never taken for frozen.
 
 Two silences are not a service's fault, and judge nobody:
@@ -32,21 +34,33 @@ ROUTER = "router"
 
 @dataclass(frozen=True)
 class Frozen:
-    """The decision that process `pid` of `service` is frozen: silent for `silent_for` s."""
+    """The decision that process `pid` of `service` is frozen: silent for `silent_for` s.
+
+    `kill`: silent for the kill limit too, so it is killed (and restarted by policy); the
+    first decision (at the freeze limit) only reports it: a service starved on a loaded
+    machine may beat again, one really frozen is killed a few seconds later.
+    """
 
     service: str
     pid: int
     silent_for: float
+    kill: bool = True
 
 
 class Watchdog:
     """Judge services frozen within `limit` seconds of their process's last heartbeat,
     checked every `tick` seconds."""
 
-    def __init__(self, limit: float, tick: float, startup: float = 30.0) -> None:
+    def __init__(
+        self, limit: float, tick: float, startup: float = 30.0, kill_after: float | None = None
+    ) -> None:
         if not (math.isfinite(limit) and math.isfinite(tick) and 0 < tick < limit):
             raise ValueError(f"need 0 < tick < limit (finite), got tick {tick}, limit {limit}")
+        if kill_after is not None and not (math.isfinite(kill_after) and kill_after >= limit):
+            raise ValueError(f"need a finite kill limit >= the limit {limit}, got {kill_after}")
         self.limit = limit
+        self.kill_after = limit if kill_after is None else kill_after
+        self._killed: set[tuple[str, int]] = set()
         self.tick = tick
         self.startup = max(startup, limit)
         self._seen: dict[tuple[str, int], float] = {}  # process -> first check it ran at
@@ -79,15 +93,21 @@ class Watchdog:
             if s in self._heard and self._heard[s][0] == pid
         }
         silent = {s: t for s, t in watched.items() if t > self.limit - self.tick}
+        mute = set()
         for s, pid in running.items():  # never heard: frozen while starting (or mute)
             if s not in watched and now - self._seen[(s, pid)] > self.startup:
                 silent[s] = now - self._seen[(s, pid)]
+                mute.add(s)
         if len(watched) > 1 and len(silent) == len(watched):
             silent = {s: t for s, t in silent.items() if s == ROUTER}
-        found = [
-            Frozen(s, running[s], round(t, 3))
-            for s, t in sorted(silent.items())
-            if (s, running[s]) not in self._judged
-        ]
-        self._judged.update((f.service, f.pid) for f in found)
+        found = []
+        for s, t in sorted(silent.items()):
+            process = (s, running[s])
+            kill = s in mute or t > self.kill_after - self.tick
+            if process in self._killed or (process in self._judged and not kill):
+                continue
+            found.append(Frozen(s, running[s], round(t, 3), kill))
+            self._judged.add(process)
+            if kill:
+                self._killed.add(process)
         return found

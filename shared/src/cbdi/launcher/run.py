@@ -58,9 +58,11 @@ class LaunchOptions:
     # order must work (the world's start barrier waits for every member).
     delays: dict[str, float] = field(default_factory=dict)
     # Every service beats every `heartbeat` wall seconds (0: no heartbeats, no watchdog);
-    # one silent for `freeze_limit` seconds is frozen: reported, killed, restarted by policy.
+    # one silent for `freeze_limit` seconds is frozen: reported; still silent after
+    # `freeze_kill` seconds, it is killed and restarted by policy.
     heartbeat: float = 0.5
     freeze_limit: float = 2.0
+    freeze_kill: float = 10.0
 
 
 @dataclass
@@ -220,7 +222,8 @@ async def _start_all(
 
         tg.create_task(text_view(bus, sys.stdout))
     if opts.heartbeat > 0:
-        dog = Watchdog(opts.freeze_limit, TICK, opts.startup_timeout)
+        kill_after = max(opts.freeze_kill, opts.freeze_limit)
+        dog = Watchdog(opts.freeze_limit, TICK, opts.startup_timeout, kill_after)
         tg.create_task(watch_heartbeats(bus, dog))
         tg.create_task(watch_processes(bus, dog, procs))
     await _wait_alive(live, [router], opts)

@@ -2,9 +2,10 @@
 
 The decisions are `cbdi.launcher.liveness.Watchdog`'s; this shell feeds it what it
 hears on `cbdi/heartbeat/**` with the wall clock, and acts on each `Frozen`: a log line
-(`frozen service=... pid=... silent_for=...`), a `ServiceFrozen` message on
-`cbdi/launcher/health` (which the monitor records), and SIGKILL, after which the
-service's supervisor restarts it by its restart policy, as after a crash.
+(`frozen service=... pid=... silent_for=... action=report|kill`) and a `ServiceFrozen`
+message on `cbdi/launcher/health` (which the monitor records); at the kill limit also
+SIGKILL, after which the service's supervisor restarts it by its restart policy, as after
+a crash.
 """
 
 from __future__ import annotations
@@ -51,14 +52,19 @@ async def watch_processes(
 
 
 async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen) -> None:
-    if not proc.kill_frozen(frozen.pid):
+    if frozen.kill:
+        if not proc.kill_frozen(frozen.pid):
+            return
+    elif not proc.running or proc.pid != frozen.pid:
         return
+    action = "kill" if frozen.kill else "report"
+    limit = dog.kill_after if frozen.kill else dog.limit
     proc.sink(
         "launcher",
         f"frozen service={frozen.service} pid={frozen.pid} silent_for={frozen.silent_for:.2f}"
-        f" limit={dog.limit:g} action=kill",
+        f" limit={limit:g} action={action}",
     )
     report = ServiceFrozen(
-        service=frozen.service, pid=frozen.pid, silent_for=frozen.silent_for, limit=dog.limit
+        service=frozen.service, pid=frozen.pid, silent_for=frozen.silent_for, limit=limit
     )
     await publish(bus, keys.launcher_stream("health"), report, block=True)
