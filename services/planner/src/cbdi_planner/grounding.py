@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 from cbdi_planner.compile import Compiler
 from cbdi_planner.dnf import Conj
@@ -23,6 +25,7 @@ from cbdi_planner.effects import Effs, build_snap
 from cbdi_planner.errors import Unsolvable
 from cbdi_planner.pddl.ast import Domain, NumEffect, Problem
 from cbdi_planner.reachability import (
+    GAtom,
     Objects,
     _walk_effects,
     fluent_predicates,
@@ -30,25 +33,57 @@ from cbdi_planner.reachability import (
 )
 from cbdi_planner.task import INTERNAL, GroundAction, Snap, Task, TimedLiterals
 
-__all__ = ["ground"]
+__all__ = ["Grounding", "ground", "grounding", "static_functions"]
 
 
-def ground(domain: Domain, problem: Problem) -> Task:
-    """Ground `problem`; raise `Unsolvable` if the goal mentions an unreachable fact."""
-    objects = Objects(domain, problem)
-    fluent = fluent_predicates(domain, problem)
-    instances, atoms = reachable_instances(domain, problem, objects, fluent)
-    static_atoms = {(a.predicate, *a.args) for a in problem.init if a.predicate not in fluent}
-    fluent_atoms = {a for a in atoms if a[0] in fluent}
+@dataclass(frozen=True, slots=True)
+class Grounding:
+    """A ground task and what it takes to give it another initial state.
+
+    `fact_index` and `var_index` map ground atoms and function heads to their bit and
+    variable; `fluent` names the predicates some effect changes (the rest were folded
+    away); `reached` holds every fact relaxed-reachable from the initial state (snap
+    semantics, as the pruning found them). A task for an initial state within `reached`
+    (and with the same objects, static facts and goal) has no action this one lacks.
+    """
+
+    task: Task
+    fact_index: Mapping[GAtom, int]
+    var_index: Mapping[tuple[str, ...], int]
+    fluent: frozenset[str]
+    reached: int
+
+
+def static_functions(domain: Domain) -> set[str]:
+    """Return the functions no action changes (their values are folded into the task)."""
     changed = {
         e.head.name
         for a in domain.actions
         for e in _walk_effects(a.effects)
         if isinstance(e, NumEffect)
     }
-    static_functions = set(domain.functions) - changed
+    return set(domain.functions) - changed
+
+
+def ground(domain: Domain, problem: Problem) -> Task:
+    """Ground `problem`; raise `Unsolvable` if the goal mentions an unreachable fact."""
+    return grounding(domain, problem).task
+
+
+def grounding(domain: Domain, problem: Problem) -> Grounding:
+    """Ground `problem` and keep its indices; raise `Unsolvable` as `ground` does."""
+    objects = Objects(domain, problem)
+    fluent = fluent_predicates(domain, problem)
+    instances, atoms = reachable_instances(domain, problem, objects, fluent)
+    static_atoms = {(a.predicate, *a.args) for a in problem.init if a.predicate not in fluent}
+    fluent_atoms = {a for a in atoms if a[0] in fluent}
     compiler = Compiler(
-        objects, static_atoms, fluent_atoms, problem.init_numeric, static_functions, domain.file
+        objects,
+        static_atoms,
+        fluent_atoms,
+        problem.init_numeric,
+        static_functions(domain),
+        domain.file,
     )
     actions: list[GroundAction] = []
     for inst in instances:
@@ -80,8 +115,10 @@ def ground(domain: Domain, problem: Problem) -> Task:
         tils=tils,
         name=problem.name,
     )
-    task.actions = _prune(task)
-    return task
+    task.actions, reached = _prune(task)
+    return Grounding(
+        task, compiler.fact_index, compiler.var_index, frozenset(fluent), reached
+    )
 
 
 def _disjunctive_goal(
@@ -125,8 +162,9 @@ def _timed_literals(problem: Problem, compiler: Compiler) -> list[TimedLiterals]
     return [TimedLiterals(t, add, dele) for t, (add, dele) in sorted(by_time.items())]
 
 
-def _prune(task: Task) -> list[GroundAction]:
-    """Keep the actions whose start and end are relaxed-reachable, renumbered.
+def _prune(task: Task) -> tuple[list[GroundAction], int]:
+    """Keep the actions whose start and end are relaxed-reachable, renumbered; and the
+    facts they reach.
 
     Starts and ends are reached separately, as snap actions: an end may need what
     another action's start gives later (required concurrency). Deletes and numeric
@@ -158,7 +196,7 @@ def _prune(task: Task) -> list[GroundAction]:
             live.add(action.index)
             changed = True
     kept = [a for a in task.actions if a.index in live]
-    return [_renumber(a, i) for i, a in enumerate(kept)]
+    return [_renumber(a, i) for i, a in enumerate(kept)], reached
 
 
 def _cond_adds(snap: object) -> int:

@@ -25,6 +25,7 @@ from cbdi.wire.agent import ActionStatus, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
+from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.problem import (
     GoalError,
     beliefs_from_problem,
@@ -49,7 +50,6 @@ from cbdi_planner.continual import (
 )
 from cbdi_planner.continual.improver import Improver
 from cbdi_planner.errors import PlannerError, Unsolvable
-from cbdi_planner.grounding import ground
 from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan, ScheduledAction
@@ -111,6 +111,7 @@ class ContinualPlanner:
     ) -> None:
         self.agent, self.domain, self.settings, self.grid = agent, domain, settings, grid
         self.transients = transients or Transients()
+        self.groundings = Groundings(domain, self.transients)
         self.log: Log = log or (lambda *a, **k: None)
         self.improve = improve
         self.beliefs = BeliefSet()
@@ -145,7 +146,16 @@ class ContinualPlanner:
         )
 
     def task(self, goal: list[list[str]]) -> Task:
-        return ground(self.domain, problem_from_beliefs(self.domain, self.beliefs, goal))
+        """The task of reaching `goal` from the beliefs (grounded once, see `Groundings`)."""
+        return self.groundings.task(self.beliefs, goal)
+
+    def request_task(self, goal: list[list[str]]) -> Task:
+        """`task`, raising Unsolvable if the goal is unreachable from the beliefs even
+        with deletes ignored (what grounding from the beliefs alone would say)."""
+        task = self.task(goal)
+        if not reaches_goal(task):
+            raise Unsolvable("no action reaches the goal from these beliefs (relaxed)")
+        return task
 
     def next_grid(self, after: float) -> float:
         return math.floor(after / self.grid + 1e-9) * self.grid + self.grid
@@ -199,10 +209,10 @@ class ContinualPlanner:
             req = replace(req, request_id=self.request.request_id, goal=goal)
             self.request = req
             if self.line is not None and self.line.steps:
-                return self._from_committed("revise", self.task(req.goal))
+                return self._from_committed("revise", self.request_task(req.goal))
         self.request = replace(req, kind="start")
         self.line, self.last_forecast, self.repair_trigger = None, ("", "", ""), ""
-        task = self.task(req.goal)
+        task = self.request_task(req.goal)
         line = Line(self._plan_id(), "new", self.next_grid(self.now))
         self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
         return [self._status(req.request_id, "searching")]
@@ -386,7 +396,15 @@ class ContinualPlanner:
         return [self._failure(search.request_id, reason, goal, search.blocked)]
 
     def _blocked(self, goal: list[list[str]]) -> bool:
-        return bool(goal) and self.transients.blocked(self.domain, self.beliefs, goal)
+        if not goal:
+            return False
+        try:
+            known = self.groundings.blocked(self.beliefs, goal)
+        except (GoalError, PlannerError):
+            return False
+        if known is not None:
+            return known
+        return self.transients.blocked(self.domain, self.beliefs, goal)
 
     def _failure(
         self, request_id: str, reason: str, goal: list[list[str]], blocked: bool | None = None
