@@ -19,7 +19,7 @@ from cbdi_monitor.difference import compare, fields_of
 from cbdi_monitor.errors import NotReplayableError, UnknownAgentError
 from cbdi_monitor.reader import RecordedMessage
 from cbdi_monitor.recorder import McapRecorder
-from cbdi_monitor.reenact import Await, Send, outputs_of, script_of, shell_args
+from cbdi_monitor.reenact import Await, Output, Send, outputs_of, script_of, shell_args
 
 MEMBERS = ["robot1/planner", "robot1/scheduler", "robot1/executor"]
 INFO = WorldInfo(
@@ -145,6 +145,27 @@ def test_a_difference_is_named_by_field_and_epoch_and_measurements_are_not_one()
         "differs",
     )
     assert compare(recorded, recorded).matched == 3
+
+
+def test_beliefs_sent_as_changes_or_whole_are_the_same_beliefs() -> None:
+    from cbdi.beliefs import BeliefSet, BeliefsSender, fact
+
+    sets = [BeliefSet.of([fact("in", "r", f"c_{k}"), fact("free", "c_9")]) for k in range(4)]
+    key = keys.scheduler_beliefs("robot1")
+
+    def series(sender: BeliefsSender, resend_at: int = -1) -> dict[str, list[Output]]:
+        out = []
+        for k, b in enumerate(sets):
+            if k == resend_at:
+                sender.resend()  # the planner appeared then: that update went whole
+            payload = encode(sender.update(b, float(k), k))
+            out.append(Output(key, k + 1, k + 1, payload, "robot1/scheduler", k, "beliefs", k))
+        return {key: out}
+
+    recorded = series(BeliefsSender("robot1"), resend_at=2)
+    assert compare(recorded, series(BeliefsSender("robot1"))).same
+    sets[3] = sets[3].adding([fact("free", "c_8")])  # one belief more in the last set
+    assert not compare(recorded, series(BeliefsSender("robot1"))).same
 
 
 def test_what_the_replay_sent_after_the_recording_ended_is_not_a_difference() -> None:

@@ -13,9 +13,22 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
+from msgspec.structs import replace
+
 from cbdi.wire.agent import BeliefsUpdate
 
-__all__ = ["Atom", "Belief", "BeliefSet", "fact", "fluent", "from_wire", "instance", "to_wire"]
+__all__ = [
+    "Atom",
+    "Belief",
+    "BeliefSet",
+    "BeliefsReceiver",
+    "BeliefsSender",
+    "fact",
+    "fluent",
+    "from_wire",
+    "instance",
+    "to_wire",
+]
 
 Atom = tuple[str, ...]  # ("litter_pose", "pla61", "c_6_1"): a predicate or function and its args
 
@@ -140,9 +153,86 @@ def to_wire(beliefs: BeliefSet, agent: str, time: float, epoch: int = -1) -> Bel
 
 
 def from_wire(update: BeliefsUpdate) -> BeliefSet:
-    """Return the belief set a `BeliefsUpdate` carries."""
+    """Return the belief set a whole-set `BeliefsUpdate` carries (a change needs the set
+    it changes: `BeliefsReceiver`)."""
+    if update.base:
+        raise ValueError(f"beliefs update {update.seq} changes update {update.base}")
     return BeliefSet(
         MappingProxyType(dict(update.instances)),
         frozenset(tuple(f) for f in update.facts),
         MappingProxyType({tuple(a): float(v) for a, v in update.fluents}),
     )
+
+
+class BeliefsSender:
+    """Number a series of belief sets and send each as what changed since the last one.
+
+    A whole set goes first, then every `whole_every` updates, and next after `resend()`
+    (a receiver appeared that may have missed the series): a receiver that lost its place
+    is back within that many updates.
+    """
+
+    def __init__(self, agent: str, whole_every: int = 64) -> None:
+        if whole_every < 1:
+            raise ValueError("whole_every must be at least 1")
+        self.agent, self.whole_every = agent, whole_every
+        self.seq = 0
+        self.last: BeliefSet | None = None
+        self.since_whole = 0
+
+    def resend(self) -> None:
+        """Send the next update whole."""
+        self.last = None
+
+    def update(self, beliefs: BeliefSet, time: float, epoch: int = -1) -> BeliefsUpdate:
+        """Return the next update of the series, for `beliefs`."""
+        self.seq += 1
+        last, self.last = self.last, beliefs
+        if last is None or self.since_whole + 1 >= self.whole_every:
+            self.since_whole = 0
+            return replace(to_wire(beliefs, self.agent, time, epoch), seq=self.seq)
+        self.since_whole += 1
+        inst, old_inst = beliefs.instances, last.instances
+        flu, old_flu = beliefs.fluents, last.fluents
+        return BeliefsUpdate(
+            agent=self.agent,
+            time=time,
+            epoch=epoch,
+            seq=self.seq,
+            base=self.seq - 1,
+            instances={n: t for n, t in sorted(inst.items()) if old_inst.get(n) != t},
+            facts=[list(a) for a in sorted(beliefs.facts - last.facts)],
+            fluents=[(list(a), v) for a, v in sorted(flu.items()) if old_flu.get(a) != v],
+            dropped_instances=sorted(n for n in old_inst if n not in inst),
+            dropped_facts=[list(a) for a in sorted(last.facts - beliefs.facts)],
+            dropped_fluents=[list(a) for a in sorted(a for a in old_flu if a not in flu)],
+        )
+
+
+class BeliefsReceiver:
+    """Rebuild a sender's belief sets from its series of updates."""
+
+    def __init__(self) -> None:
+        self.beliefs: BeliefSet | None = None
+        self.seq = 0
+
+    def apply(self, update: BeliefsUpdate) -> BeliefSet | None:
+        """Return the belief set after `update`, or None if it changes an update this
+        receiver does not have (it then waits for a whole set)."""
+        if not update.base:
+            self.beliefs, self.seq = from_wire(update), update.seq
+            return self.beliefs
+        if self.beliefs is None or update.base != self.seq:
+            return None
+        old = self.beliefs
+        dropped_instances = set(update.dropped_instances)
+        inst = {n: t for n, t in old.instances.items() if n not in dropped_instances}
+        inst.update(update.instances)
+        dropped = {tuple(a) for a in update.dropped_facts}
+        facts = (old.facts - dropped) | {tuple(a) for a in update.facts}
+        gone = {tuple(a) for a in update.dropped_fluents}
+        flu = {a: v for a, v in old.fluents.items() if a not in gone}
+        flu.update((tuple(a), float(v)) for a, v in update.fluents)
+        self.beliefs = BeliefSet(MappingProxyType(inst), frozenset(facts), MappingProxyType(flu))
+        self.seq = update.seq
+        return self.beliefs

@@ -14,7 +14,7 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
 from cbdi import keys
-from cbdi.beliefs import BeliefSet, from_wire
+from cbdi.beliefs import BeliefSet, BeliefsReceiver
 from cbdi.bus import publish, request, sequenced_inputs
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.clock import SimClock
@@ -59,6 +59,7 @@ class ExecutorService:
         self.clock = SimClock()
         self.beliefs = BeliefSet()
         self.beliefs_epoch = -1
+        self.beliefs_in = BeliefsReceiver()
         self.outcome_epoch = -1
         self.acked = -1
         self.holding = False  # lockstep: an epoch's inputs are being taken in, dispatch after
@@ -124,8 +125,11 @@ class ExecutorService:
             self.clock.on_tick(msg.epoch, msg.time)
             await self.step()
         elif isinstance(msg, BeliefsUpdate):
-            if msg.agent == self.agent and msg.epoch >= self.beliefs_epoch:
-                self.beliefs, self.beliefs_epoch = from_wire(msg), msg.epoch
+            beliefs = self.beliefs_in.apply(msg) if msg.agent == self.agent else None
+            if beliefs is None and msg.agent == self.agent:
+                self.ctx.log.warning("beliefs_skipped", seq=msg.seq, base=msg.base)
+            if beliefs is not None and msg.epoch >= self.beliefs_epoch:
+                self.beliefs, self.beliefs_epoch = beliefs, msg.epoch
                 self.clock.on_tick(msg.epoch, msg.time)  # the world has reached that epoch
                 await self.step()
         elif isinstance(msg, PartialPlan):

@@ -5,7 +5,10 @@ less the clock-paced `ready` acks), and must have been sent in the same epoch an
 and be equal field by field after msgpack decoding, except for measurements
 (`MEASUREMENTS`): fields that say how fast this machine was, not what the agent decided.
 Today that is one: `SearchRound.seconds`, the wall time a search round took. Everything
-else, sim times and acks' `sent` counts included, must be equal.
+else, sim times and acks' `sent` counts included, must be equal. Belief updates are
+compared as the whole sets they give (`whole_sets`): whether the scheduler sent one whole
+or as a change depends on when its planner and executor appeared on the bus, not on what
+the agent believed.
 
 A replayed message whose recorded twin is missing from the file is counted as unverified,
 not as a difference: a key published without blocking whose message was dropped on the
@@ -16,12 +19,16 @@ way to the recorder, or what the replay published after the member's last record
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import msgpack
 
+from cbdi.beliefs import BeliefsReceiver, to_wire
+from cbdi.errors import WireError
 from cbdi.lockstep import stage_rank
+from cbdi.wire.agent import BeliefsUpdate
+from cbdi.wire.base import decode, encode
 from cbdi_monitor.reenact import REPLAYED, Output
 
 __all__ = [
@@ -32,6 +39,7 @@ __all__ = [
     "Verdict",
     "compare",
     "fields_of",
+    "whole_sets",
 ]
 
 # schema -> its top-level fields that are measurements, left out of the comparison
@@ -97,6 +105,7 @@ def compare(
     recorded: Mapping[str, Sequence[Output]], replayed: Mapping[str, Sequence[Output]]
 ) -> Verdict:
     """Compare every key's messages; the first difference is the earliest in the run."""
+    recorded, replayed = whole_sets(recorded), whole_sets(replayed)
     matched = unverified = 0
     found: list[Difference] = []
     ends = _ends(recorded)
@@ -119,6 +128,28 @@ def compare(
     first = min(found, key=Difference.moment) if found else None
     keys = len(set(recorded) | set(replayed))
     return Verdict(matched, len(found), unverified, keys, first)
+
+
+def whole_sets(outputs: Mapping[str, Sequence[Output]]) -> dict[str, list[Output]]:
+    """Return `outputs` with every belief update as the whole set it gives (a change
+    whose base is missing stays as it is, and so differs)."""
+    out: dict[str, list[Output]] = {}
+    for key, messages in outputs.items():
+        receiver = BeliefsReceiver()
+        rebuilt: list[Output] = []
+        for o in sorted(messages, key=lambda o: o.index):
+            try:
+                update = decode(o.payload, BeliefsUpdate)
+            except WireError:
+                rebuilt.append(o)
+                continue
+            beliefs = receiver.apply(update)
+            if beliefs is not None:
+                whole = to_wire(beliefs, update.agent, update.time, update.epoch)
+                o = replace(o, payload=encode(whole))
+            rebuilt.append(o)
+        out[key] = rebuilt
+    return out
 
 
 def _ends(recorded: Mapping[str, Sequence[Output]]) -> dict[str, tuple[int, int, int]]:

@@ -116,9 +116,7 @@ def grounding(domain: Domain, problem: Problem) -> Grounding:
         name=problem.name,
     )
     task.actions, reached = _prune(task)
-    return Grounding(
-        task, compiler.fact_index, compiler.var_index, frozenset(fluent), reached
-    )
+    return Grounding(task, compiler.fact_index, compiler.var_index, frozenset(fluent), reached)
 
 
 def _disjunctive_goal(

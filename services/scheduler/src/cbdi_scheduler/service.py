@@ -15,7 +15,7 @@ from itertools import count
 from msgspec.structs import replace
 
 from cbdi import keys
-from cbdi.beliefs import to_wire
+from cbdi.beliefs import BeliefsSender
 from cbdi.bus import publish, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
@@ -75,6 +75,7 @@ class SchedulerService:
         self.search_id = ""
         self.last_search: SearchRequest | None = None  # resent when the planner (re)appears
         self.ack_timeout = ack_timeout
+        self.beliefs_out = BeliefsSender(self.agent)  # what changed, every epoch
         self.members: list[str] = []  # the world's lockstep members (from its info)
         self.lockstep = Lockstep(
             self.input_keys(),
@@ -130,7 +131,7 @@ class SchedulerService:
             return
         reaction = self.react(msg)
         if isinstance(msg, Percepts):  # beliefs first: the planner plans from them
-            update = to_wire(self.mind.beliefs, self.agent, msg.time, msg.epoch)
+            update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
             await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
         await self.act(reaction)
 
@@ -173,13 +174,23 @@ class SchedulerService:
 
     async def watch_planner(self) -> None:
         """Send the search in progress again when the planner appears: a request sent
-        before it subscribed, or to a planner that restarted, would be lost."""
+        before it subscribed, or to a planner that restarted, would be lost. The next
+        beliefs go whole (it missed the series)."""
         token = keys.alive(keys.service_id("planner", self.agent))
         async for event in self.ctx.bus.watch_alive(token):
+            if event.alive:
+                self.beliefs_out.resend()
             if event.alive and self.last_search is not None:
                 self.ctx.log.info("search_resent", request=self.last_search.request_id)
                 key = keys.planner_requests(self.agent)
                 await publish(self.ctx.bus, key, self.last_search, block=True)
+
+    async def watch_executor(self) -> None:
+        """Send the next beliefs whole when the executor (re)appears."""
+        token = keys.alive(keys.service_id("executor", self.agent))
+        async for event in self.ctx.bus.watch_alive(token):
+            if event.alive:
+                self.beliefs_out.resend()
 
     async def watch_group(self) -> None:
         """Tell an agent that appears our standing claims (it missed them)."""
@@ -288,6 +299,7 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
         ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
         ctx.start(service.run(stream, settings.load_map), name="scheduler")
         ctx.start(service.watch_planner(), name="planner-watch")
+        ctx.start(service.watch_executor(), name="executor-watch")
         ctx.start(service.watch_group(), name="group-watch")
 
     return body

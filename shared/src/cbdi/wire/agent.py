@@ -17,6 +17,7 @@ from cbdi.wire.fields import (
     MAX_ITEMS,
     AgentName,
     Atom,
+    Count,
     Epoch,
     Finite,
     Id,
@@ -125,7 +126,15 @@ class ArrestReport(Message, frozen=True, tag="cbdi.agent.ArrestReport/1"):
 
 
 class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
-    """The agent's whole belief set, published by the scheduler on every change."""
+    """The agent's beliefs, published by the scheduler every epoch: the whole set, or
+    what changed since an earlier update of the same series.
+
+    `seq` numbers the sender's updates (1, 2, ...; 0: a whole set outside any series).
+    `base` 0: `instances`, `facts` and `fluents` are the whole set. Otherwise the update
+    changes the set update `base` gave: it adds (or sets) those, and removes the
+    `dropped_*` ones. A receiver without update `base` waits for the next whole set
+    (`cbdi.beliefs.BeliefsReceiver`).
+    """
 
     agent: AgentName
     time: Finite
@@ -133,6 +142,17 @@ class BeliefsUpdate(Message, frozen=True, tag="cbdi.agent.BeliefsUpdate/1"):
     facts: Many[Atom]
     fluents: Many[tuple[Atom, Finite]]
     epoch: Epoch = -1  # the world epoch whose percepts these beliefs include
+    seq: Count = 0
+    base: Count = 0
+    dropped_instances: Many[Symbol] = []
+    dropped_facts: Many[Atom] = []
+    dropped_fluents: Many[Atom] = []
+
+    def __post_init__(self) -> None:
+        if self.base and self.base >= self.seq:
+            raise ValueError(f"update {self.seq} cannot change a later update ({self.base})")
+        if not self.base and (self.dropped_instances or self.dropped_facts or self.dropped_fluents):
+            raise ValueError("a whole belief set drops nothing (dropped_* need a base)")
 
 
 class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):

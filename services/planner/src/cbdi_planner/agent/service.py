@@ -23,7 +23,7 @@ from msgspec.structs import replace
 
 from cbdi import keys
 from cbdi.agentfile import RawAgentFile
-from cbdi.beliefs import BeliefSet, from_wire
+from cbdi.beliefs import BeliefSet, BeliefsReceiver
 from cbdi.bus import publish, sequenced_inputs
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.lockstep import Lockstep, Need, announce_ready, default_sender, send_ack
@@ -198,6 +198,7 @@ class PlannerService(_Epochs):
         self.lockstep = self._lockstep(self.input_keys())
         self.beliefs = BeliefSet()
         self.has_beliefs = False
+        self.beliefs_in = BeliefsReceiver()
         self.deferred: SearchRequest | None = None  # a request that came before any beliefs
         self.now = 0.0
         self.request: SearchRequest | None = None
@@ -214,7 +215,11 @@ class PlannerService(_Epochs):
 
     async def handle(self, msg: Message) -> None:
         if isinstance(msg, BeliefsUpdate):
-            self.beliefs, self.now = from_wire(msg), max(self.now, msg.time)
+            beliefs = self.beliefs_in.apply(msg)
+            if beliefs is None:
+                self.ctx.log.warning("beliefs_skipped", seq=msg.seq, base=msg.base)
+                return  # a change of beliefs we never had: the next whole set comes soon
+            self.beliefs, self.now = beliefs, max(self.now, msg.time)
             self.has_beliefs = True
             self.transients.see(self.beliefs)
             if self.deferred is not None:
@@ -360,6 +365,7 @@ class OnlinePlannerService(_Epochs):
     ) -> None:
         self.ctx, self.core, self.agent = ctx, core, core.agent
         self.has_beliefs = False
+        self.beliefs_in = BeliefsReceiver()
         self.deferred: SearchRequest | None = None
         self.wake = asyncio.Event()
         self.planning_speed = planning_speed or core.settings.planning_speed
@@ -403,8 +409,12 @@ class OnlinePlannerService(_Epochs):
     async def handle(self, key: str, msg: Message) -> None:
         core = self.core
         if isinstance(msg, BeliefsUpdate):
+            beliefs = self.beliefs_in.apply(msg)
+            if beliefs is None:
+                self.ctx.log.warning("beliefs_skipped", seq=msg.seq, base=msg.base)
+                return  # a change of beliefs we never had: the next whole set comes soon
             self.has_beliefs = True
-            await self.send(core.on_beliefs(from_wire(msg), msg.time))
+            await self.send(core.on_beliefs(beliefs, msg.time))
             if self.deferred is not None:
                 req, self.deferred = self.deferred, None
                 await self.start(keys.planner_requests(core.agent), req)
