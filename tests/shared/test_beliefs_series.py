@@ -73,3 +73,17 @@ def test_nonsense_series_numbers_are_refused_on_the_wire(fields: dict[str, objec
     raw |= {"instances": {}, "facts": [], "fluents": [], **fields}
     with pytest.raises(WireError):
         decode(msgspec.msgpack.encode(raw), BeliefsUpdate)
+
+
+@settings(max_examples=100, deadline=None)
+@given(belief_sets, st.lists(st.tuples(st.booleans(), st.lists(belief, max_size=4)), max_size=6))
+def test_a_derived_set_indexes_its_facts_as_a_fresh_one(
+    sets: list[BeliefSet], changes: list[tuple[bool, list[object]]]
+) -> None:
+    beliefs = sets[0]
+    beliefs.facts_of("free")  # built: derived sets take it over
+    for adding, items in changes:
+        beliefs = (beliefs.adding if adding else beliefs.removing)(items)  # type: ignore[arg-type]
+        fresh = BeliefSet(beliefs.instances, beliefs.facts, beliefs.fluents)
+        for name in ("free", "in", "near"):
+            assert beliefs.facts_of(name) == fresh.facts_of(name)

@@ -9,8 +9,9 @@ before and after (reactive rules fire on change) and nothing is shared by accide
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from types import MappingProxyType
 
 from msgspec.structs import replace
@@ -96,7 +97,7 @@ class BeliefSet:
                 facts.add(b.atom)
             else:
                 flu[b.atom] = b.value
-        return BeliefSet(MappingProxyType(inst), frozenset(facts), MappingProxyType(flu))
+        return self._derived(inst, frozenset(facts), flu)
 
     def removing(self, beliefs: Iterable[Belief]) -> BeliefSet:
         """Return these beliefs without `beliefs`."""
@@ -108,7 +109,55 @@ class BeliefSet:
                 facts.discard(b.atom)
             else:
                 flu.pop(b.atom, None)
-        return BeliefSet(MappingProxyType(inst), frozenset(facts), MappingProxyType(flu))
+        return self._derived(inst, frozenset(facts), flu)
+
+    def _derived(
+        self, inst: dict[str, str], facts: frozenset[Atom], flu: dict[Atom, float]
+    ) -> BeliefSet:
+        """A belief set changed from this one; it takes over this one's index of facts
+        by predicate (if built), sorting again only the predicates that changed."""
+        out = BeliefSet(MappingProxyType(inst), facts, MappingProxyType(flu))
+        index = self.__dict__.get("_facts_by_predicate")
+        if index is not None:
+            changed: dict[str, set[Atom]] = {}
+            for atom in facts ^ self.facts:  # each one added or removed
+                changed.setdefault(atom[0], set()).add(atom)
+            new = dict(index)
+            for name, atoms in changed.items():
+                group = sorted(set(index.get(name, ())) ^ atoms)
+                if group:
+                    new[name] = tuple(group)
+                else:
+                    new.pop(name, None)
+            out.__dict__["_facts_by_predicate"] = new
+        return out
+
+    def facts_of(self, predicate: str) -> Sequence[Atom]:
+        """Return the facts of `predicate`, sorted (indexed once per belief set)."""
+        return self._facts_by_predicate.get(predicate, ())
+
+    def fluents_of(self, function: str) -> Sequence[tuple[Atom, float]]:
+        """Return the values of `function`, sorted by atom (indexed once per belief set)."""
+        return self._fluents_by_function.get(function, ())
+
+    @cached_property
+    def sorted_instances(self) -> Sequence[tuple[str, str]]:
+        """Every instance and its type, sorted by name."""
+        return tuple(sorted(self.instances.items()))
+
+    @cached_property
+    def _facts_by_predicate(self) -> dict[str, tuple[Atom, ...]]:
+        out: dict[str, list[Atom]] = {}
+        for atom in sorted(self.facts):
+            out.setdefault(atom[0], []).append(atom)
+        return {k: tuple(v) for k, v in out.items()}
+
+    @cached_property
+    def _fluents_by_function(self) -> dict[str, tuple[tuple[Atom, float], ...]]:
+        out: dict[str, list[tuple[Atom, float]]] = {}
+        for atom, value in sorted(self.fluents.items()):
+            out.setdefault(atom[0], []).append((atom, value))
+        return {k: tuple(v) for k, v in out.items()}
 
     def holds(self, b: Belief) -> bool:
         """Return whether `b` is believed (a function belief: with that value)."""
@@ -128,9 +177,12 @@ class BeliefSet:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, BeliefSet):
             return NotImplemented
+        if self is other:
+            return True
         return (
-            dict(self.instances) == dict(other.instances)
+            len(self.facts) == len(other.facts)
             and self.facts == other.facts
+            and dict(self.instances) == dict(other.instances)
             and dict(self.fluents) == dict(other.fluents)
         )
 

@@ -40,6 +40,8 @@ class Claims:
     predicates: frozenset[str]
     held: dict[str, dict[str, tuple[int, float]]] = field(default_factory=dict)
     # item -> agent -> (epoch, cost) of its claim
+    _owners: dict[str, str] | None = field(default=None, repr=False, compare=False)
+    # the assignment of `held`, until a claim changes it
 
     def claimable(self, atom: tuple[str, ...]) -> str | None:
         """Return the item `atom` claims, or None if its predicate is not claimable."""
@@ -68,6 +70,7 @@ class Claims:
             c = HOLDING if item in held else float(cost(item))
             at = before[0] if before is not None else epoch
             self.held.setdefault(item, {})[self.agent] = (at, c)
+            self._owners = None
             out.append(Claim(agent=self.agent, group=self.group, item=item, epoch=at, cost=c))
         return out
 
@@ -78,6 +81,7 @@ class Claims:
             item = self.claimable(atom)
             if item is None or self.held.get(item, {}).pop(self.agent, None) is None:
                 continue
+            self._owners = None
             out.append(Claim(agent=self.agent, group=self.group, item=item, released=True))
         return out
 
@@ -86,6 +90,7 @@ class Claims:
         if claim.group != self.group or claim.agent == self.agent:
             return False
         holders = self.held.setdefault(claim.item, {})
+        self._owners = None
         if claim.released:
             holders.pop(claim.agent, None)
         else:
@@ -98,6 +103,11 @@ class Claims:
 
     def assignment(self) -> dict[str, str]:
         """Return every claimed item's owner (the same at every agent with these claims)."""
+        if self._owners is None:
+            self._owners = self._assign()
+        return self._owners
+
+    def _assign(self) -> dict[str, str]:
         contests = []
         for item, holders in self.held.items():
             if not holders:

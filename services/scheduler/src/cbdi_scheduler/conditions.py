@@ -105,18 +105,18 @@ def _unify(pattern: tuple[str, ...], values: tuple[str, ...], binding: Binding) 
 def _literal(lit: Literal, beliefs: BeliefSet, binding: Binding) -> Iterator[Binding]:
     b = substitute_belief(lit.belief, binding)
     if lit.check == "EX":
-        for name, type_ in sorted(beliefs.instances.items()):
+        for name, type_ in beliefs.sorted_instances:
             if b.type and type_ != b.type:
                 continue
             found = _unify((b.name,), (name,), binding)
             if found is not None:
                 yield found
     elif lit.check in ("T", "F"):
-        matches = (
-            _unify(b.params, atom[1:], binding)
-            for atom in sorted(beliefs.facts)
-            if atom[0] == b.name
-        )
+        if not any(p == WILDCARD or "{" in p for p in b.params):  # ground: look it up
+            if (b.atom in beliefs.facts) == (lit.check == "T"):
+                yield binding
+            return
+        matches = (_unify(b.params, atom[1:], binding) for atom in beliefs.facts_of(b.name))
         found_any = [m for m in matches if m is not None]
         if lit.check == "T":
             yield from found_any
@@ -124,8 +124,8 @@ def _literal(lit: Literal, beliefs: BeliefSet, binding: Binding) -> Iterator[Bin
             yield binding
     else:
         compare = _NUMERIC[lit.check]
-        for atom, value in sorted(beliefs.fluents.items()):
-            if atom[0] == b.name and compare(value, lit.value):
+        for atom, value in beliefs.fluents_of(b.name):
+            if compare(value, lit.value):
                 found = _unify(b.params, atom[1:], binding)
                 if found is not None:
                     yield found

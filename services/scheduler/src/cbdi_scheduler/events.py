@@ -73,9 +73,14 @@ def revise_from_percepts(
     `blocked` (seen blocked lately, `seen_blocked`) stay not free out of sight."""
     square = {cell_name(c) for c in (*p.free, *p.blocked, p.position)}
     me = p.agent
-    stale = [fact(*atom) for atom in beliefs.facts if _stale(atom, square, me)]
+    stale = [
+        fact(*atom)
+        for name in ("free", "litter_pose", "in", "holding")  # what `_stale` may replace
+        for atom in beliefs.facts_of(name)
+        if _stale(atom, square, me)
+    ]
     fresh = [fact("free", cell_name(c)) for c in p.free]
-    bins = {f[2] for f in beliefs.facts if f[0] == "bin_pose"}
+    bins = {f[2] for f in beliefs.facts_of("bin_pose")}
     unseen = {n for n, t in beliefs.instances.items() if t == "cell"} - square - bins
     unseen -= set(blocked)
     fresh += [fact("free", c) for c in sorted(unseen) if ("free", c) not in beliefs.facts]

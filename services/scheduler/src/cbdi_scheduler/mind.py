@@ -95,7 +95,7 @@ class Mind:
         rule can make the robot yield (step aside); the rules see it next cycle."""
         cur = self.intentions.current
         want = {("stalled", cur.desire.name)} if cur is not None and cur.stalled else set()
-        have = {f for f in self.beliefs.facts if f[0] == "stalled"}
+        have = set(self.beliefs.facts_of("stalled"))
         if want == have:
             return
         self.beliefs = self.beliefs.removing(fact(*f) for f in have - want).adding(
@@ -206,7 +206,7 @@ class Mind:
         return self.claims.foreign(atom) is None or self.claims.claimable(atom) in holding
 
     def _holding(self) -> set[str]:
-        return {f[2] for f in self.beliefs.facts if f[:2] == ("holding", self.agent)}
+        return {f[2] for f in self.beliefs.facts_of("holding") if f[1] == self.agent}
 
     # -- claims in the group -------------------------------------------------------------
     def on_claim(self, claim: Claim) -> Reaction:
