@@ -8,7 +8,9 @@ the in-memory bus, lockstep, flat out) and times, per epoch and agent:
   `Percepts`);
 - the planner service's per-epoch work outside its search rounds: the beliefs update
   applied, the forecast of the executing plan and what follows from it
-  (`OnlinePlannerService.handle` on a `BeliefsUpdate`);
+  (`OnlinePlannerService.handle` on a `BeliefsUpdate`), on the event loop; and apart,
+  the grounding it does ahead in a worker thread (`ContinualPlanner.warm`), most epochs
+  none (the task is reused);
 
 as CPU seconds of the event-loop thread (`time.thread_time`, so a search round running in
 its worker thread meanwhile is not counted), and the bytes of the belief updates. It
@@ -45,6 +47,7 @@ from cbdi.wire.common import RunFinished
 from cbdi.wire.world import Percepts
 from cbdi_executor.service import ExecutorSettings, executor_main
 from cbdi_planner.agent import service as planner_service
+from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.service import PlannerSettings, planner_main
 from cbdi_planner.pddl import parse_domain
 from cbdi_scheduler import service as scheduler_service
@@ -143,6 +146,16 @@ def main(argv: list[str] | None = None) -> int:
     sched, plan = scheduler_service.SchedulerService, planner_service.OnlinePlannerService
     sched.on_message = timed(sched.on_message, Percepts, times, "scheduler cycle")  # type: ignore[method-assign]
     plan.handle = timed(plan.handle, BeliefsUpdate, times, "planner beliefs")  # type: ignore[method-assign]
+    warm = ContinualPlanner.warm
+
+    def warm_timed(self: Any, *a: Any) -> None:
+        started = time.thread_time()
+        try:
+            warm(self, *a)
+        finally:
+            times[f"{self.agent} planner grounding"].append(time.thread_time() - started)
+
+    ContinualPlanner.warm = warm_timed  # type: ignore[method-assign]
     groundings: list[Any] = []
     init = plan.__init__
 

@@ -12,6 +12,7 @@ the scheduler swaps in with an early arrest.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -148,6 +149,29 @@ class ContinualPlanner:
     def task(self, goal: list[list[str]]) -> Task:
         """The task of reaching `goal` from the beliefs (grounded once, see `Groundings`)."""
         return self.groundings.task(self.beliefs, goal)
+
+    def warm(self, beliefs: BeliefSet, req: SearchRequest | None = None) -> None:
+        """Ground ahead (call from a worker thread) the task that `on_beliefs(beliefs)` or
+        `on_request(req)` will plan with, so they find it grounded and the event loop is
+        not held up by a grounding; errors are left for them to report."""
+        goal = self.goal_of(req) if req is not None else None
+        if goal is None and self.request is not None:
+            goal = [list(g) for g in self.request.goal]
+        if not goal or (req is not None and req.problem):
+            return
+        self.transients.see(beliefs)
+        with contextlib.suppress(GoalError, PlannerError):
+            self.groundings.task(beliefs, goal)
+
+    def goal_of(self, req: SearchRequest) -> list[list[str]] | None:
+        """The goal `req` makes the search aim at (a revision: the union of goals)."""
+        if req.kind == "cancel":
+            return None
+        goal = [list(g) for g in req.goal]
+        if req.kind == "revise" and self.request is not None:
+            union = [list(g) for g in self.request.goal]
+            return union + [g for g in goal if g not in union]
+        return goal
 
     def request_task(self, goal: list[list[str]]) -> Task:
         """`task`, raising Unsolvable if the goal is unreachable from the beliefs even

@@ -23,7 +23,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from cbdi.beliefs import BeliefSet, fact
+from cbdi.beliefs import Atom, BeliefSet, fact
 from cbdi_planner.agent.problem import problem_from_beliefs
 from cbdi_planner.agent.transient import Transients
 from cbdi_planner.grounding import Grounding, grounding, static_functions
@@ -58,6 +58,7 @@ class Groundings:
         # Beliefs have no timed literals: the fluent predicates are the domain's.
         self.fluent = frozenset(fluent_predicates(domain, _NO_PROBLEM))
         self._cached: _Cached | None = None
+        self._last: tuple[BeliefSet, tuple[tuple[str, ...], ...], Task] | None = None
         self.grounded = 0
         self.reused = 0
 
@@ -67,19 +68,24 @@ class Groundings:
         Raise GoalError for a goal the domain cannot express and PlannerError (Unsolvable
         among them) as grounding does.
         """
-        problem = problem_from_beliefs(self.domain, beliefs, goal)
-        key = self._key(problem, goal)
+        wanted = tuple(tuple(g) for g in goal)
+        last = self._last
+        if last is not None and last[0] is beliefs and last[1] == wanted:
+            return last[2]  # the same beliefs again (a warm-up, then the epoch's work)
+        key, fluent_facts, values = self._parts(beliefs, wanted)
         cached = self._cached
+        task = None
         if cached is not None and cached.key == key:
-            task = _with_init(cached.grounding, problem)
-            if task is not None:
-                self.reused += 1
-                return task
-        g = grounding(self.domain, self._superset(beliefs, goal, problem))
-        self._cached = _Cached(key, g)
-        self.grounded += 1
-        task = _with_init(g, problem)
-        assert task is not None, "a task grounded from a superset reaches its subset"
+            task = _with_init(cached.grounding, fluent_facts, values)
+            self.reused += task is not None
+        if task is None:
+            problem = problem_from_beliefs(self.domain, beliefs, goal)
+            g = grounding(self.domain, self._superset(beliefs, goal, problem))
+            self._cached = _Cached(key, g)
+            self.grounded += 1
+            task = _with_init(g, fluent_facts, values)
+            assert task is not None, "a task grounded from a superset reaches its subset"
+        self._last = (beliefs, wanted, task)
         return task
 
     def blocked(self, beliefs: BeliefSet, goal: Sequence[Sequence[str]]) -> bool | None:
@@ -91,10 +97,10 @@ class Groundings:
         cached = self._cached
         if cached is None:
             return None
-        problem = problem_from_beliefs(self.domain, beliefs, goal)
-        if cached.key != self._key(problem, goal):
+        key, facts, values = self._parts(beliefs, tuple(tuple(g) for g in goal))
+        if cached.key != key:
             return None
-        task = _with_init(cached.grounding, problem)
+        task = _with_init(cached.grounding, facts, values)
         index = cached.grounding.fact_index
         if task is None or any(f not in index for f in missing):
             return None
@@ -103,16 +109,33 @@ class Groundings:
             restored |= 1 << index[f]
         return reaches_goal(task, State(restored, task.init_nums))
 
-    def _key(self, problem: Problem, goal: Sequence[Sequence[str]]) -> Key:
-        fluent = self.fluent
-        nums = problem.init_numeric
-        return (
-            tuple(tuple(g) for g in goal),
-            frozenset(problem.objects.items()),
-            frozenset((a.predicate, *a.args) for a in problem.init if a.predicate not in fluent),
-            frozenset((h, v) for h, v in nums.items() if h.name in self.statics),
-            frozenset(h for h in nums if h.name not in self.statics),
+    def _parts(
+        self, beliefs: BeliefSet, goal: tuple[tuple[str, ...], ...]
+    ) -> tuple[Key, list[Atom], dict[Atom, float]]:
+        """The grounding's key for `beliefs` (what `problem_from_beliefs` would make of
+        them but the fluent facts and values), their fluent facts and function values."""
+        domain, fluent = self.domain, self.fluent
+        known_types = set(domain.types) | {"object"}
+        objects = frozenset(
+            (n, t)
+            for n, t in beliefs.instances.items()
+            if t in known_types and n not in domain.constants
         )
+        statics: list[Atom] = []
+        fluents: list[Atom] = []
+        for atom in beliefs.facts:
+            params = domain.predicates.get(atom[0])
+            if params is not None and len(params) == len(atom) - 1:
+                (fluents if atom[0] in fluent else statics).append(atom)
+        values = {a: v for a, v in beliefs.fluents.items() if a[0] in domain.functions}
+        key = (
+            goal,
+            objects,
+            frozenset(statics),
+            frozenset((a, v) for a, v in values.items() if a[0] in self.statics),
+            frozenset(a for a in values if a[0] not in self.statics),
+        )
+        return key, fluents, values
 
     def _superset(
         self, beliefs: BeliefSet, goal: Sequence[Sequence[str]], problem: Problem
@@ -128,25 +151,23 @@ class Groundings:
         return problem_from_beliefs(self.domain, beliefs.adding(extra), goal)
 
 
-def _with_init(g: Grounding, problem: Problem) -> Task | None:
-    """Return `g`'s task from `problem`'s initial state, or None if that state holds a
-    fact the grounding never reaches (a task grounded from it may have more actions)."""
-    index, fluent = g.fact_index, g.fluent
-    facts = 0
-    for atom in problem.init:
-        if atom.predicate not in fluent:
-            continue
-        bit = index.get((atom.predicate, *atom.args))
+def _with_init(g: Grounding, facts: list[Atom], values: dict[Atom, float]) -> Task | None:
+    """Return `g`'s task from the initial state of these fluent `facts` and function
+    `values`, or None if it holds a fact the grounding never reaches (a task grounded
+    from it may have more actions)."""
+    index = g.fact_index
+    mask = 0
+    for atom in facts:
+        bit = index.get(atom)
         if bit is None:
             return None
-        facts |= 1 << bit
-    if facts & ~g.reached:
+        mask |= 1 << bit
+    if mask & ~g.reached:
         return None
-    values = {(h.name, *h.args): v for h, v in problem.init_numeric.items()}
     nums = [math.nan] * len(g.var_index)
     for head, var in g.var_index.items():
         nums[var] = values.get(head, math.nan)
-    return replace(g.task, init_facts=facts, init_nums=tuple(nums))
+    return replace(g.task, init_facts=mask, init_nums=tuple(nums))
 
 
 def reaches_goal(task: Task, state: State | None = None) -> bool:

@@ -414,6 +414,7 @@ class OnlinePlannerService(_Epochs):
                 self.ctx.log.warning("beliefs_skipped", seq=msg.seq, base=msg.base)
                 return  # a change of beliefs we never had: the next whole set comes soon
             self.has_beliefs = True
+            await asyncio.to_thread(core.warm, beliefs)  # a grounding holds no loop up
             await self.send(core.on_beliefs(beliefs, msg.time))
             if self.deferred is not None:
                 req, self.deferred = self.deferred, None
@@ -433,6 +434,7 @@ class OnlinePlannerService(_Epochs):
             core.on_status(msg)
 
     async def start(self, key: str, req: SearchRequest) -> None:
+        await asyncio.to_thread(self.core.warm, self.core.beliefs, req)
         try:
             await self.send(self.core.on_request(req))
         except BadRequestError as exc:

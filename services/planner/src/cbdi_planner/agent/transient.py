@@ -42,7 +42,9 @@ class Transients:
         if not self.predicates or beliefs.facts is self._facts:
             return
         self._facts = beliefs.facts
-        self.seen.update(f for f in beliefs.facts if f[0] in self.predicates)
+        new = {f for f in beliefs.facts if f[0] in self.predicates} - self.seen
+        if new:  # a new set, never changed in place: a search thread may be reading it
+            self.seen = self.seen | new
 
     def missing(self, beliefs: BeliefSet) -> list[Atom]:
         """Return the transient facts seen before that `beliefs` lack (over known objects)."""
