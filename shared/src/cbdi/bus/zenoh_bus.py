@@ -53,6 +53,10 @@ def zenoh_config(cfg: BusConfig) -> zenoh.Config:
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(cfg.mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    # No shared-memory transport: cbdi's messages are small (belief changes, plans), and
+    # its pool (16 MB per session, mapped again by every session it reaches) would cost
+    # each service some 20 to 64 MB of memory for nothing (`extra` turns it back on).
+    conf.insert_json5("transport/shared_memory/enabled", "false")
     if cfg.connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
     if cfg.listen:
