@@ -20,10 +20,13 @@ RUN . /tmp/build-env/env.sh \
  && /opt/venv/bin/pip install -q -r requirements.lock setuptools==80.9.0
 COPY shared ./shared
 COPY services ./services
+COPY domains/recycling/pyproject.toml ./domains/recycling/pyproject.toml
+COPY domains/recycling/src ./domains/recycling/src
 RUN . /tmp/build-env/env.sh \
  && /opt/venv/bin/pip install -q --no-deps --no-build-isolation \
       ./shared ./services/world ./services/monitor \
       ./services/planner ./services/scheduler ./services/executor \
+      ./domains/recycling \
  && /opt/venv/bin/pip uninstall -q -y setuptools pip
 
 FROM ${BASE_IMAGE}

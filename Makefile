@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner
+PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner domains/recycling
 PYTEST_ARGS ?=
 
 .PHONY: venv demo test lint bench bench-planner bench-continual bench-table1 clean system-tools image
@@ -47,9 +47,9 @@ test: venv system-tools
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 lint: venv
-	$(BIN)/ruff check shared services tests benchmarks
+	$(BIN)/ruff check shared services domains tests benchmarks
 	$(BIN)/mypy --strict shared/src/cbdi
-	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src
+	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+from cbdi_recycling.events import revise_from_percepts
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, to_wire
@@ -17,7 +18,6 @@ from cbdi.bus.base import Bus
 from cbdi.lockstep import announce_ready, send_ack
 from cbdi.wire.agent import ActionStatus, ArrestReport, Check, EarlyArrest, PartialPlan, PlanStep
 from cbdi.wire.world import Percepts, StatsRequest, WorldStats
-from cbdi_scheduler.events import revise_from_percepts
 from tests_support import REPO, wait_for
 
 pytestmark = pytest.mark.e2e

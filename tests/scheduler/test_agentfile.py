@@ -75,6 +75,7 @@ def write(tmp_path: Path, body: str) -> Path:
         ('transient_predicates = ["fre"]\n', "transient_predicates[0]", "no predicate 'fre'"),
         ("transient_predicates = [3]\n", "transient_predicates[0]", "a predicate name"),
         ('transient_predicates = "free"\n', "transient_predicates", "a list"),
+        ('knowledge = "warehouse"\n', "knowledge", "no domain knowledge 'warehouse'"),
     ],
 )
 def test_mistakes_name_the_field(tmp_path: Path, body: str, field: str, reason: str) -> None:
@@ -89,3 +90,16 @@ def test_missing_domain_and_file(tmp_path: Path) -> None:
         parse_agent('domain = "none.pddl"', "x.toml", "r", tmp_path)
     with pytest.raises(AgentFileError, match="file"):
         load_agent(tmp_path / "none.toml", "r")
+
+
+def test_the_domain_knowledge_comes_from_the_domain_package(tmp_path: Path) -> None:
+    from cbdi_recycling.knowledge import RecyclingKnowledge
+    from cbdi_scheduler.knowledge import available, load_knowledge
+    from cbdi_scheduler.mind import Mind
+
+    assert "recycling" in available()
+    spec = load_agent(write(tmp_path, 'knowledge = "recycling"\n'), "r")
+    assert spec.knowledge == "recycling"
+    mind = Mind(spec)
+    assert isinstance(mind.knowledge, RecyclingKnowledge) and mind.knowledge.agent == "r"
+    assert load_knowledge("recycling", "r2") is not load_knowledge("recycling", "r2")  # per agent

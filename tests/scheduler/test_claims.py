@@ -5,13 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import msgspec
+from cbdi_recycling.events import UNKNOWN_DISTANCE, distance
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
 from cbdi.wire.world import LitterView, Percepts
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.claims import Claims
-from cbdi_scheduler.events import UNKNOWN_DISTANCE, distance
 from cbdi_scheduler.mind import Mind, Reaction
 
 AGENT = Path(__file__).resolve().parents[2] / "domains/recycling/agents/recycler.toml"
@@ -163,8 +163,9 @@ def test_distances_on_the_30x30_campus_are_shortest_paths_and_fast() -> None:
     source cell, each later query a lookup (the issue measured 40 s and 2 GB before)."""
     import time
 
+    from cbdi_recycling.events import Distances, map_beliefs
+
     from cbdi.wire.world import BinView, WorldInfo
-    from cbdi_scheduler.events import Distances, map_beliefs
     from cbdi_world.maps import load_map
 
     root = Path(__file__).resolve().parents[2]

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import pytest
+from cbdi_recycling.events import revise_from_percepts
 from msgspec.structs import replace
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import LitterView, Percepts
 from cbdi_scheduler.conditions import Literal, bindings, holds
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
-from cbdi_scheduler.events import revise_from_percepts
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect, fire_rules
 
 WORLD = BeliefSet.of(
@@ -218,8 +218,9 @@ def test_an_obstacle_out_of_sight_is_forgotten_but_bins_stay() -> None:
 
 
 def test_map_beliefs_describe_the_grid() -> None:
+    from cbdi_recycling.events import map_beliefs
+
     from cbdi.wire.world import BinView, WorldInfo
-    from cbdi_scheduler.events import map_beliefs
 
     info = WorldInfo(
         map_name="m",
@@ -245,7 +246,7 @@ def test_map_beliefs_describe_the_grid() -> None:
 def test_an_obstacle_out_of_sight_is_remembered_for_a_while() -> None:
     """Forgotten at once, a blocked short way out of sight looked free again, and a robot
     turned back and forth between it and a detour (seen with three robots on 7x7)."""
-    from cbdi_scheduler.events import OBSTACLE_MEMORY, seen_blocked
+    from cbdi_recycling.events import OBSTACLE_MEMORY, seen_blocked
 
     cells = [instance(f"c_{x}_0", "cell") for x in range(6)]
     before = BeliefSet.of([*cells, fact("free", "c_1_0")])

@@ -23,6 +23,7 @@ from cbdi.agentfile import (
 from cbdi.beliefs import INSTANCE, Belief
 from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
+from cbdi_scheduler.knowledge import available
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect
 
@@ -50,6 +51,7 @@ class AgentFile:
     rtc_deadline: float = 2.0  # the executing desire's deadline: this many times its span
     wait_stall: float = 8.0  # s a blocked wait may see nothing change before it counts
     claim: tuple[str, ...] = ()  # goal predicates whose first argument the group shares out
+    knowledge: str = "recycling"  # the domain knowledge (cbdi_scheduler.knowledge) to load
     beliefs: tuple[Belief, ...] = ()
     desires: tuple[Desire, ...] = ()
     rules: tuple[ReactiveRule, ...] = ()
@@ -88,6 +90,7 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         exec_retries=r.natural(bdi, "exec_retries", 3, "scheduler"),
         rtc_deadline=_rtc_deadline(r.opt(bdi, "rtc_deadline", float, 2.0, "scheduler"), source),
         wait_stall=_wait_stall(r.opt(bdi, "wait_stall", float, 8.0, "scheduler"), source),
+        knowledge=_knowledge(r.opt(data, "knowledge", str, "recycling"), source),
         claim=tuple(
             r.check(p, str, f"scheduler.claim[{i}]")
             for i, p in enumerate(r.opt(bdi, "claim", list, [], "scheduler"))
@@ -101,6 +104,15 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         rules=tuple(r.rule(x, f"rules[{i}]") for i, x in enumerate(r.opt(data, "rules", list, []))),
         planning=raw.planning,
     )
+
+
+def _knowledge(name: str, source: str) -> str:
+    installed = available()
+    if name not in installed:
+        known = ", ".join(installed) or "none"
+        why = f"no domain knowledge {name!r} is installed (installed: {known})"
+        raise AgentFileError(source, "knowledge", why)
+    return name
 
 
 def _wait_stall(value: float, source: str) -> float:

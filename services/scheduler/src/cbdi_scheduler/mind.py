@@ -16,13 +16,8 @@ from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
-from cbdi_scheduler.events import (
-    Distances,
-    revise_from_outcome,
-    revise_from_percepts,
-    seen_blocked,
-)
 from cbdi_scheduler.intentions import Command, IntentionScheduler
+from cbdi_scheduler.knowledge import DomainKnowledge, load_knowledge
 from cbdi_scheduler.rules import fire_rules
 
 __all__ = ["Mind", "Reaction"]
@@ -41,8 +36,9 @@ class Reaction:
 class Mind:
     """One agent's beliefs, desires and intentions."""
 
-    def __init__(self, spec: AgentFile) -> None:
+    def __init__(self, spec: AgentFile, knowledge: DomainKnowledge | None = None) -> None:
         self.spec = spec
+        self.knowledge = knowledge or load_knowledge(spec.knowledge, spec.agent, spec.source)
         self.agent = spec.agent
         self.beliefs = BeliefSet.of(spec.beliefs)
         self.desires: dict[str, Desire] = {d.name: d for d in spec.desires}
@@ -53,8 +49,6 @@ class Mind:
         self.epoch = -1
         self.refire = False  # fire the rules next cycle even if nothing changed
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
-        self.distance = Distances()
-        self.blocked: dict[str, float] = {}  # cell -> when last seen blocked
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -70,8 +64,7 @@ class Mind:
         """Run one BDI cycle on this epoch's percepts."""
         self.now, self.epoch = p.time, p.epoch
         before = self.beliefs
-        self.blocked = seen_blocked(self.blocked, p)
-        self.beliefs = revise_from_percepts(self.beliefs, p, blocked=self.blocked)
+        self.beliefs = self.knowledge.on_percepts(self.beliefs, p)
         out = Reaction(beliefs_changed=self.beliefs != before)
         if out.beliefs_changed or self.epoch == 0 or self.refire:
             # After a drop the rules fire again even on unchanged beliefs: what made the
@@ -159,7 +152,7 @@ class Mind:
         if outcome.agent != self.agent:
             return Reaction()
         before = self.beliefs
-        self.beliefs = revise_from_outcome(self.beliefs, outcome)
+        self.beliefs = self.knowledge.on_outcome(self.beliefs, outcome)
         return Reaction(beliefs_changed=self.beliefs != before)
 
     # -- planner and executor ------------------------------------------------------------
@@ -206,7 +199,7 @@ class Mind:
         return self.claims.foreign(atom) is None or self.claims.claimable(atom) in holding
 
     def _holding(self) -> set[str]:
-        return {f[2] for f in self.beliefs.facts_of("holding") if f[1] == self.agent}
+        return self.knowledge.holding(self.beliefs, self.agent)
 
     # -- claims in the group -------------------------------------------------------------
     def on_claim(self, claim: Claim) -> Reaction:
@@ -230,7 +223,7 @@ class Mind:
             out.claims += claims.claim(
                 (g.atom for g in mine),
                 self.epoch,
-                lambda item: self.distance(self.beliefs, self.agent, item),
+                lambda item: self.knowledge.cost(self.beliefs, self.agent, item),
                 holding=holding,
             )
             if len(mine) == len(desire.goal):

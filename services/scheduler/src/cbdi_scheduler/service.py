@@ -34,7 +34,6 @@ from cbdi.wire.agent import (
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import ActionOutcome, EpochAck, Percepts, Tick
-from cbdi_scheduler.events import map_beliefs
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
 from cbdi_scheduler.requests import serve_request
@@ -107,7 +106,7 @@ class SchedulerService:
         except (CbdiError, TimeoutError) as exc:
             self.ctx.log.warning("no_map", error=str(exc) or "the world did not answer")
             return
-        self.mind.beliefs = self.mind.beliefs.adding(map_beliefs(info))
+        self.mind.beliefs = self.mind.beliefs.adding(self.mind.knowledge.map_beliefs(info))
         self.members = list(info.members)
         me = keys.member(self.agent, "scheduler")
         self.lockstep.lockstep_member = info.lockstep and me in info.members

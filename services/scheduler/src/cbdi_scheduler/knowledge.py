@@ -1,0 +1,66 @@
+"""What a scheduler must know of its domain, behind one small interface.
+
+The mind is generic: beliefs, rules, desires, intentions, claims. What only a domain
+knows comes from a `DomainKnowledge` object that the domain's package provides under
+the entry-point group `cbdi.knowledge`, named by the agent file's `knowledge` key:
+
+- the beliefs the world's map gives (`map_beliefs`, the paper's `map_loaded`);
+- how one epoch's percepts and an action's outcome revise the beliefs (the Events
+  Monitor; it may keep memory of its own, such as obstacles seen lately);
+- what a claim on a goal object costs the agent (for the recycling robots: the believed
+  path length to the item), so that a group shares its goals out;
+- which objects the agent holds (a claim on an object in hand always wins).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from typing import Protocol
+
+from cbdi.beliefs import Belief, BeliefSet
+from cbdi.errors import ConfigError
+from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
+
+__all__ = ["GROUP", "DomainKnowledge", "available", "load_knowledge"]
+
+GROUP = "cbdi.knowledge"
+
+
+class DomainKnowledge(Protocol):
+    """One agent's knowledge of its domain (one object per agent: it may keep state)."""
+
+    def map_beliefs(self, info: WorldInfo) -> list[Belief]:
+        """The beliefs the world's map gives."""
+        ...
+
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts) -> BeliefSet:
+        """`beliefs` revised with one epoch's percepts."""
+        ...
+
+    def on_outcome(self, beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:
+        """`beliefs` revised with what an action's outcome tells and no percept shows."""
+        ...
+
+    def cost(self, beliefs: BeliefSet, agent: str, item: str) -> float:
+        """What pursuing goal object `item` costs `agent` (lower wins a claim)."""
+        ...
+
+    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
+        """The objects `agent` holds."""
+        ...
+
+
+def available() -> list[str]:
+    """The names of the installed domains' knowledge."""
+    return sorted(ep.name for ep in entry_points(group=GROUP))
+
+
+def load_knowledge(name: str, agent: str, source: str = "agent file") -> DomainKnowledge:
+    """Return a new `name` knowledge for `agent`; ConfigError naming what is installed."""
+    found = [ep for ep in entry_points(group=GROUP) if ep.name == name]
+    if not found:
+        known = ", ".join(available()) or "none"
+        raise ConfigError(source, "knowledge", f"no domain knowledge {name!r} (installed: {known})")
+    factory: Callable[[str], DomainKnowledge] = found[0].load()
+    return factory(agent)
