@@ -37,6 +37,9 @@ class Budget:
 
     max_expansions: int | None = None
     max_seconds: float | None = None
+    # Called with the expansion count before each expansion (it may block the search, or
+    # raise SearchTimeout to stop it): virtual time paces an offline search epoch by epoch.
+    pace: Callable[[int], None] | None = None
 
 
 @dataclass(slots=True)
@@ -76,6 +79,8 @@ class _Clock:
 
     def tick(self) -> None:
         self.stats.expanded += 1
+        if self.budget.pace is not None:
+            self.budget.pace(self.stats.expanded)
         limit = self.budget.max_expansions
         if limit is not None and self.stats.expanded > limit:
             raise SearchTimeout(f"expansion budget of {limit} exhausted")

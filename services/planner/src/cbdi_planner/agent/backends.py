@@ -10,6 +10,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -55,15 +56,20 @@ class Counted:
     timeout: bool = False  # the expansion bound ran out (no verdict on solvability)
 
 
-def plan_counted(domain: Domain, problem: Problem, max_expansions: int) -> Counted:
+def plan_counted(
+    domain: Domain,
+    problem: Problem,
+    max_expansions: int,
+    pace: Callable[[int], None] | None = None,
+) -> Counted:
     """Plan `problem` as `plan_with("cbdi")` does, bounded by node expansions only.
 
     Virtual time charges the search to simulated time by what it expanded, so the
-    result is the same on any machine, however loaded.
+    result is the same on any machine, however loaded. `pace` (`Pacer.pace`) lets the
+    search expand only what has been paid for.
     """
-    result = search(
-        ground(domain, problem), strategy="ff", budget=Budget(max_expansions=max_expansions)
-    )
+    budget = Budget(max_expansions=max_expansions, pace=pace)
+    result = search(ground(domain, problem), strategy="ff", budget=budget)
     expanded = max(1, result.stats.expanded)
     if result.plan is not None:
         return Counted(result.plan, expanded)

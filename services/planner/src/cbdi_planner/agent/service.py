@@ -13,7 +13,9 @@ new request replaces the search; a cancelled search's late result is dropped.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -36,6 +38,7 @@ from cbdi.wire.world import EpochAck, Tick
 from cbdi_planner.agent.backends import COUNTING_BACKENDS, Counted, plan_counted, plan_with
 from cbdi_planner.agent.continual import ContinualPlanner, Search
 from cbdi_planner.agent.errors import BadRequestError, UnknownAgentError
+from cbdi_planner.agent.pacing import Pacer
 from cbdi_planner.agent.problem import (
     GoalError,
     beliefs_from_problem,
@@ -172,8 +175,8 @@ class _Pending:
 
     request: SearchRequest
     problem: Problem
-    result: Counted | None = None
-    owed: int = 0
+    pacer: Pacer = field(default_factory=Pacer)
+    result: asyncio.Future[Counted] | None = None
 
 
 class PlannerService(_Epochs):
@@ -240,6 +243,8 @@ class PlannerService(_Epochs):
         if self.searching is not None:
             self.searching.cancel()
             self.searching = None
+        if self.pending is not None:
+            self.pending.pacer.cancel()  # its thread ends at its next expansion
         self.pending = None
         if req.kind == "cancel":
             self.request = None
@@ -272,23 +277,41 @@ class PlannerService(_Epochs):
         if p is None:
             return
         if p.result is None:
-            most = max(1, round(self.raw.planning.timeout * self.planning_speed))
-            try:
-                p.result = await asyncio.to_thread(plan_counted, self.domain, p.problem, most)
-            except (GoalError, PlannerError, ValueError) as exc:
-                p.result = Counted(None, 1, str(exc), timeout=isinstance(exc, SearchTimeout))
-            p.owed = p.result.expanded
-        p.owed -= self.budget()
-        if p.owed > 0:
-            return
+            p.result = self.start_paced(p)
+        if not await asyncio.to_thread(p.pacer.pay, self.budget()):
+            return  # still searching: this epoch paid for its share
+        result = await p.result
         self.pending = None
-        if p.result.plan is None:
-            self.ctx.log.warning(
-                "search_failed", request=p.request.request_id, error=p.result.error
-            )
-            await self.failed(p.request, p.result.error, timeout=p.result.timeout)
+        if result.plan is None:
+            self.ctx.log.warning("search_failed", request=p.request.request_id, error=result.error)
+            await self.failed(p.request, result.error, timeout=result.timeout)
             return
-        await self.publish_plan(p.request, p.result.plan)
+        await self.publish_plan(p.request, result.plan)
+
+    def start_paced(self, p: _Pending) -> asyncio.Future[Counted]:
+        """Start `p`'s search in a thread of its own that expands only what is paid for
+        (a daemon: a search waiting for payment never holds the process at exit)."""
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[Counted] = loop.create_future()
+        most = max(1, round(self.raw.planning.timeout * self.planning_speed))
+
+        def run() -> None:
+            try:
+                result = plan_counted(self.domain, p.problem, most, pace=p.pacer.pace)
+            except (GoalError, PlannerError, ValueError) as exc:
+                result = Counted(None, 1, str(exc), timeout=isinstance(exc, SearchTimeout))
+            finally:
+                p.pacer.end()
+
+            def settle() -> None:
+                if not done.done():
+                    done.set_result(result)
+
+            with contextlib.suppress(RuntimeError):  # the service stopped meanwhile
+                loop.call_soon_threadsafe(settle)
+
+        threading.Thread(target=run, name="offline-search", daemon=True).start()
+        return done
 
     def problem(self, req: SearchRequest) -> tuple[SearchRequest, Problem]:
         """The request's problem: its own PDDL problem, or the beliefs and its goal."""
