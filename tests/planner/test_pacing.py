@@ -57,3 +57,13 @@ def test_a_cancelled_search_stops_at_its_next_expansion() -> None:
     pacer.cancel()
     thread.join(5)
     assert not thread.is_alive() and out[0].plan is None and out[0].timeout
+
+
+def test_when_ffs_budget_runs_out_the_goal_agenda_tries_with_as_much_again() -> None:
+    """24 items on the 30x30 campus: FF's climbing and best-first find no plan within
+    700 expansions; the goal agenda then does, and both searches are charged."""
+    domain = parse_domain((RECYCLING / "pddl/domain.pddl").read_text(), "domain.pddl")
+    problem = parse_problem((RECYCLING / "problems/campus-30x30.pddl").read_text(), domain, "c")
+    counted = plan_counted(domain, problem, 700)
+    assert counted.plan is not None and not counted.error
+    assert counted.expanded > 700  # the first search's 700 and more

@@ -35,11 +35,14 @@ def plan_with(
     if backend == "cbdi":
         # FF's search (climbing, then best-first), not the goal agenda: the agent acts on
         # this first plan, and climbing to the whole goal gives shorter plans.
-        result = search(ground(domain, problem), strategy="ff", budget=Budget(max_seconds=seconds))
+        task = ground(domain, problem)
+        result = search(task, strategy="ff", budget=Budget(max_seconds=seconds))
+        if result.status == "timeout":  # as plan_counted: the goal agenda, as long again
+            result = search(task, strategy="auto", budget=Budget(max_seconds=seconds))
         if result.plan is not None:
             return result.plan
         if result.status == "timeout":
-            raise SearchTimeout(f"no plan within {seconds:g} s")
+            raise SearchTimeout(f"no plan within {2 * seconds:g} s")
         raise Unsolvable(f"no plan reaches the goal ({result.status})")
     if backend == "kairos":
         return _kairos(domain_file, problem, seconds)
@@ -68,9 +71,18 @@ def plan_counted(
     result is the same on any machine, however loaded. `pace` (`Pacer.pace`) lets the
     search expand only what has been paid for.
     """
-    budget = Budget(max_expansions=max_expansions, pace=pace)
-    result = search(ground(domain, problem), strategy="ff", budget=budget)
-    expanded = max(1, result.stats.expanded)
+    task = ground(domain, problem)
+    result = search(task, strategy="ff", budget=Budget(max_expansions=max_expansions, pace=pace))
+    expanded = result.stats.expanded
+    if result.status == "timeout":
+        # FF's climbing and best-first ran out (24 items on a 30x30 map): the goal agenda
+        # (one goal fact at a time) with a budget as large again, its cost added.
+        first = expanded
+        later = None if pace is None else (lambda n: pace(first + n))
+        result = search(task, strategy="auto", budget=Budget(max_expansions, pace=later))
+        expanded += result.stats.expanded
+        max_expansions *= 2
+    expanded = max(1, expanded)
     if result.plan is not None:
         return Counted(result.plan, expanded)
     if result.status == "timeout":
