@@ -94,6 +94,7 @@ def test_missing_domain_and_file(tmp_path: Path) -> None:
 
 def test_the_domain_knowledge_comes_from_the_domain_package(tmp_path: Path) -> None:
     from cbdi_recycling.knowledge import RecyclingKnowledge
+
     from cbdi_scheduler.knowledge import available, load_knowledge
     from cbdi_scheduler.mind import Mind
 
