@@ -91,10 +91,12 @@ def checked(task: Task, plan: Plan, problem: Path) -> str:
     return "ok" if done.returncode == 0 else f"kairos: {done.stdout.strip()[-200:]}"
 
 
-def continual(task: Task, row: Row, bound: RoundBound, timeout: float, problem: Path) -> None:
+def continual(
+    task: Task, row: Row, bound: RoundBound, timeout: float, problem: Path, agenda: bool
+) -> None:
     """Run the continual search to the goal, appending partial plans as they come."""
     started = time.perf_counter()
-    thread = SearchThread(task, initial_state(task))
+    thread = SearchThread(task, initial_state(task), agenda=agenda)
     actions: list = []
     while not thread.finished and time.perf_counter() - started < timeout:
         for event in thread.step(bound):
@@ -133,7 +135,7 @@ def measure(problem: Path, args: argparse.Namespace) -> Row:
     task = ground(domain, parse_problem(problem.read_text(), domain, str(problem)))
     row = Row(problem.stem, len(task.facts), len(task.actions), time.perf_counter() - started)
     bound = RoundBound(seconds=args.round, plan_size=args.plan_size)
-    continual(task, row, bound, args.timeout, problem)
+    continual(task, row, bound, args.timeout, problem, args.agenda)
     offline(task, row, args.strategy, args.timeout, problem)
     return row
 
@@ -182,6 +184,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--round", type=float, default=0.1, help="round interval (s)")
     parser.add_argument("--plan-size", type=int, default=8, help="actions per partial plan")
     parser.add_argument("--strategy", default="auto", help="offline search: auto, ff, ehc, bfs")
+    parser.add_argument(
+        "--agenda",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the continual greedy search reaches the goal facts one at a time (default on)",
+    )
     parser.add_argument("--csv", type=Path, help="also write the rows to this CSV file")
     args = parser.parse_args(argv)
     rows = []

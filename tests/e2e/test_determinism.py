@@ -51,7 +51,8 @@ def test_three_robots_repeat_exactly_under_load() -> None:
 
 
 def test_late_schedulers_and_planners_change_nothing() -> None:
-    """Any start order gives the same run: epoch 0 waits for every member's `ready`."""
+    """Any start order gives the same run: epoch 0 waits for every member's `ready`; and so
+    does running each agent's services in one process."""
     args = ("paper-7x7", "--agents", "3", "--seed", "2")
     on_time = run(*args)
     late = run(
@@ -66,3 +67,13 @@ def test_late_schedulers_and_planners_change_nothing() -> None:
     assert late["result"] == on_time["result"] == "done"
     assert fingerprint(late) == fingerprint(on_time)
     assert all(a["actions"] > 0 for a in late["actions"].values())  # every robot took part
+    # One process per agent (its three services on one event loop): the same run again.
+    hosted = run(*args, "--agent-process")
+    assert fingerprint(hosted) == fingerprint(on_time)
+    assert set(hosted["restarts"]) == {
+        "router",
+        "world",
+        "robot1/agent",
+        "robot2/agent",
+        "robot3/agent",
+    }

@@ -30,6 +30,7 @@ from cbdi_planner.grounding import ground
 from cbdi_planner.pddl import parse_domain, parse_problem
 from cbdi_planner.plan import Plan, ScheduledAction
 from cbdi_planner.search import search
+from cbdi_planner.simulate import validate as simulate_validate
 from cbdi_planner.state import State, initial_state
 from cbdi_planner.task import Task
 
@@ -263,3 +264,39 @@ def test_a_started_split_action_that_no_copy_fits_is_not_applicable() -> None:
     done = commit(task, steps, {0: "running"})
     assert done.state is None and done.reason == "(paint a) is not applicable"
     assert forecast(task, steps, {0: "running"}).kind == COMMITTED_FAILS
+
+
+def test_the_agenda_reaches_the_goal_facts_one_at_a_time_in_valid_partial_plans(
+    tmp_path: Path,
+) -> None:
+    """With the goal agenda the greedy rounds aim at one more goal fact at a time (the
+    nearest), so on a map with many items the concatenated plan completes with fewer
+    expansions than aiming at the whole goal at every step, and it stays valid."""
+    problem = ROOT / "domains/recycling/problems/warehouse-15x15.pddl"
+    task = load(problem.read_text())
+    bound = RoundBound(expansions=20, plan_size=8)
+    used = {}
+    for agenda in (True, False):
+        thread = SearchThread(task, initial_state(task), agenda=agenda)
+        events = run(thread, bound, limit=3000)
+        assert thread.finished and (thread.mode == "G" or not agenda)  # no fall-back needed
+        parts = [e for e in events if isinstance(e, PartialPlanFound)]
+        assert parts[-1].complete and not any(isinstance(e, SearchFailed) for e in events)
+        plan = whole(events)
+        simulate_validate(task, plan)
+        if agenda:
+            kairos_valid(plan, tmp_path, problem)
+        used[agenda] = sum(e.expanded for e in events if isinstance(e, RoundDone))
+    assert used[True] < used[False]
+
+
+def test_the_agenda_aims_at_the_nearest_goal_first_and_falls_back_to_the_whole_goal(
+    task: Task,
+) -> None:
+    from cbdi_planner.continual import NG, SearchSpace
+
+    space = SearchSpace(task, initial_state(task), agenda=True)
+    aim = space.expander.subgoal
+    assert aim is not None and aim & task.goal == aim and aim.bit_count() == 1
+    space.restart(NG, space.root)  # the complete search aims at the whole goal
+    assert space.expander.subgoal is None

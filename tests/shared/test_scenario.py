@@ -93,3 +93,20 @@ def test_each_service_is_told_its_args_and_the_launcher_records_them() -> None:
     agent_file = planner[planner.index("--agent-file") + 1]
     assert Path(agent_file).is_absolute() and Path(agent_file).name == "recycler.toml"
     assert planner[planner.index("--planning") + 1] == "offline"
+
+
+def test_one_process_per_agent_runs_its_components_with_the_same_args() -> None:
+    scenario = cli.scenario_from_args(cli._parser().parse_args(["paper-7x7", "--agents", "2"]))
+    alone = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1")}
+    hosted = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1", agent_process=True)}
+    assert set(hosted) == {"router", "world", "robot1/agent", "robot2/agent"}
+    assert hosted["world"] == alone["world"]
+    agent = hosted["robot2/agent"]
+    assert agent.members == ("robot2/planner", "robot2/scheduler", "robot2/executor")
+    sections = " ".join(agent.args).split(" -- ")
+    assert sections[0].split(" ")[0] == "agent"
+    for component, section in zip(("planner", "scheduler", "executor"), sections, strict=True):
+        words = section.split(" ")[1:] if component == "planner" else section.split(" ")
+        assert words[0] == component
+        assert tuple(words[1:]) == alone[f"robot2/{component}"].args
+    assert alone["world"].members == ("world",)

@@ -49,6 +49,9 @@ class PlanningSettings:
     min_commit_steps: int = 1
     forecast_horizon: int = 0
     empty_rounds: int = 10
+    # The greedy rounds reach the goal facts one at a time, nearest first, as the offline
+    # planner's goal agenda does: what lets the continual search finish on big maps.
+    agenda: bool = False
     # Expansions one improving search may take (Alg. 2 lines 23-24) before it gives up
     # on the plan it tries to beat (0: no bound).
     improve_expansions: int = 3000

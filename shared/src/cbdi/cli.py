@@ -15,6 +15,7 @@ __all__ = ["main"]
 Command = Callable[[Sequence[str] | None], int]
 
 _BUILTIN = {
+    "agent": ("cbdi.runtime.host", "run components of an agent in one process"),
     "compose": ("cbdi.launcher.compose", "write a compose file running a scenario in containers"),
     "router": ("cbdi.router", "run a Zenoh router"),
     "up": ("cbdi.launcher.cli", "run a scenario: router, world and agents as processes"),

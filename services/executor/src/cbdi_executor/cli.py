@@ -1,4 +1,9 @@
-"""`cbdi-executor`: run the executor of one agent."""
+"""`cbdi-executor`: run the executor of one agent.
+
+`shell(args)` builds the same service from the same arguments without running it, for a
+caller that runs several shells in one process (`cbdi agent`, through the `cbdi.shells`
+entry-point group).
+"""
 
 from __future__ import annotations
 
@@ -6,30 +11,39 @@ import sys
 from collections.abc import Sequence
 
 from cbdi import keys
-from cbdi.errors import ConfigError
+from cbdi.errors import CbdiError
 from cbdi.runtime import load_config, run_service
+from cbdi.runtime.together import TogetherService
 from cbdi_executor.service import ExecutorSettings, executor_main
 
-__all__ = ["main"]
+__all__ = ["main", "shell"]
+
+PROG = "cbdi-executor"
+
+
+def shell(argv: Sequence[str] | None = None) -> TogetherService:
+    """Build the executor that `cbdi-executor ARGV` runs; raise CbdiError or ValueError
+    on bad settings."""
+    settings = load_config(
+        ExecutorSettings,
+        argv,
+        prog=PROG,
+        section="executor",
+        description="Dispatch an agent's plans to the world.",
+    )
+    keys.validate_name(settings.agent)
+    service = keys.service_id("executor", settings.agent)
+    return TogetherService(service, settings, executor_main(settings))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run until SIGTERM/SIGINT."""
+    """Run until SIGTERM/SIGINT; exit 2 on bad settings."""
     try:
-        settings = load_config(
-            ExecutorSettings,
-            argv,
-            prog="cbdi-executor",
-            section="executor",
-            description="Dispatch an agent's plans to the world.",
-        )
-        keys.validate_name(settings.agent)
-    except (ConfigError, ValueError) as exc:
-        print(f"cbdi-executor: {exc}", file=sys.stderr)
+        built = shell(argv)
+    except (CbdiError, ValueError) as exc:
+        print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
-    return run_service(
-        settings, keys.service_id("executor", settings.agent), executor_main(settings)
-    )
+    return run_service(built.settings, built.service, built.main)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from cbdi import keys
 from cbdi.bus import LogSink, MemoryNetwork, messages
 from cbdi.bus.base import Bus
 from cbdi.clock import Clock, WallClock
+from cbdi.runtime.host import SHELLS
 from cbdi.runtime.together import Together, TogetherService
 from cbdi.wire.world import EpochAck
 from cbdi_monitor.difference import WHEN, Difference, Verdict
@@ -39,7 +40,6 @@ from cbdi_monitor.reenact import (
 
 __all__ = ["Replayed", "describe", "load_shells", "reenact", "report"]
 
-SHELLS = "cbdi.shells"  # entry-point group: component name -> build(argv) -> TogetherService
 # After the script, the replay is over once the network was quiet for QUIET wall seconds
 # with the members having published at least as many messages as recorded, or for
 # STRAGGLE seconds with fewer (a planner round may still be running in its thread).

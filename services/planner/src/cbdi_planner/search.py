@@ -349,24 +349,33 @@ def goal_agenda(ex: Expander, root: Node, clock: _Clock) -> Node | None:
     searches for the whole goal at once instead) or the goal has fewer than two facts
     left to reach.
     """
-    goal = ex.task.goal
-    if (goal & ~root.state.facts).bit_count() < 2:
+    if (ex.task.goal & ~root.state.facts).bit_count() < 2:
         return None
     node: Node | None = root
     try:
         while node is not None and not is_goal(ex.task, node.state):
-            remaining = goal & ~node.state.facts
-            levels = ex.rpg.levels(node.state, remaining) if remaining else {}
-            if levels is None:
-                return None
-            nearest = min(levels, key=lambda f: (levels[f], f)) if levels else -1
-            rest = remaining & ~(1 << nearest) if nearest >= 0 else 0
-            ex.aim((goal & node.state.facts) | (1 << nearest) if rest else None)
+            ex.aim(agenda_stage(ex, node.state))
             start = ex.evaluate(node.state, node.timeline, node.running)
             node = None if ex.dead(start) else enforced_hill_climbing(ex, start, clock)
         return node
     finally:
         ex.aim(None)
+
+
+def agenda_stage(ex: Expander, state: State) -> int | None:
+    """Return the goal agenda's next stage from `state`: the goal facts reached so far plus
+    the one whose relaxed planning graph layer is lowest (ties: the lowest fact). None:
+    aim at the whole goal (fewer than two goal facts left, or one is unreachable, which
+    the whole goal's value then tells)."""
+    goal = ex.task.goal
+    remaining = goal & ~state.facts
+    if remaining.bit_count() < 2:
+        return None
+    levels = ex.rpg.levels(state, remaining)
+    if levels is None:
+        return None
+    nearest = min(levels, key=lambda f: (levels[f], f))
+    return (goal & state.facts) | (1 << nearest)
 
 
 def _first_plan(

@@ -141,6 +141,12 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(default 10; at least --freeze-limit)",
     )
     p.add_argument(
+        "--agent-process",
+        action="store_true",
+        help="run each BDI agent's planner, scheduler and executor in one process "
+        "(`cbdi agent`): about half the memory per robot",
+    )
+    p.add_argument(
         "--record",
         metavar="FILE",
         default="",
@@ -268,6 +274,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         heartbeat=args.heartbeat,
         freeze_limit=args.freeze_limit,
         freeze_kill=args.freeze_kill,
+        agent_process=args.agent_process,
     )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]

@@ -55,13 +55,25 @@ class ProcessSpec:
     argv: tuple[str, ...]
     env: dict[str, str] = field(default_factory=dict)
     args: tuple[str, ...] = ()
+    # The services the process runs when it runs several (`cbdi agent`), else empty.
+    hosts: tuple[str, ...] = ()
 
     @classmethod
     def of(
-        cls, service: str, program: Sequence[str], args: Sequence[str], env: dict[str, str]
+        cls,
+        service: str,
+        program: Sequence[str],
+        args: Sequence[str],
+        env: dict[str, str],
+        hosts: Sequence[str] = (),
     ) -> ProcessSpec:
         """Return the spec running `program` (an argv prefix) with `args`."""
-        return cls(service, argv_of(program, args), env, tuple(args))
+        return cls(service, argv_of(program, args), env, tuple(args), tuple(hosts))
+
+    @property
+    def members(self) -> tuple[str, ...]:
+        """The service ids this process runs: their liveliness and heartbeats are its."""
+        return self.hosts or (self.service,)
 
 
 LineSink = Callable[[str, str], None]

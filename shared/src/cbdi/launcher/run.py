@@ -34,8 +34,9 @@ from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
 from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy, console_script
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
-from cbdi.launcher.services import plan_services
+from cbdi.launcher.services import ServicePlan, agent_of, plan_services
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
+from cbdi.runtime.host import SEPARATOR as HOST_SEPARATOR
 from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
@@ -63,6 +64,8 @@ class LaunchOptions:
     heartbeat: float = 0.5
     freeze_limit: float = 2.0
     freeze_kill: float = 10.0
+    # One process per BDI agent running its three services (`cbdi agent`), not three.
+    agent_process: bool = False
 
 
 @dataclass
@@ -108,18 +111,43 @@ WORLD_LINGER = 30.0
 
 
 def _specs(
-    scenario: Scenario, endpoint: str, record: str = "", heartbeat: float = 0.5
+    scenario: Scenario,
+    endpoint: str,
+    record: str = "",
+    heartbeat: float = 0.5,
+    agent_process: bool = False,
 ) -> list[ProcessSpec]:
+    """Return the run's processes: one per service, or with `agent_process` one per BDI
+    agent (`robot1/agent`, running its components with `cbdi agent`)."""
     beat = {"CBDI_HEARTBEAT": str(heartbeat)}
     # A fixed hash seed: no decision may hang on the order of a set of strings.
     env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **beat}
     own = {"router": beat, "world": {**env, "CBDI_LINGER": str(WORLD_LINGER)}}
-    return [
-        ProcessSpec.of(
-            p.service, console_script(p.script, p.module), p.args, own.get(p.service, env)
-        )
-        for p in plan_services(scenario, endpoint, record)
-    ]
+    bdi = {a.name for a in scenario.agents if a.kind == "bdi"} if agent_process else set()
+    units: dict[str, list[ServicePlan]] = {}  # process id -> the services it runs, in order
+    for p in plan_services(scenario, endpoint, record):
+        agent = agent_of(p.service)
+        process = keys.service_id("agent", agent) if agent in bdi else p.service
+        units.setdefault(process, []).append(p)
+    specs = []
+    for service, plans in units.items():
+        if len(plans) == 1 and plans[0].service == service:
+            program = console_script(plans[0].script, plans[0].module)
+            specs.append(ProcessSpec.of(service, program, plans[0].args, own.get(service, env)))
+        else:
+            specs.append(_host_spec(service, plans, env))
+    return specs
+
+
+def _host_spec(service: str, plans: list[ServicePlan], env: dict[str, str]) -> ProcessSpec:
+    """Return the process running `plans` with `cbdi agent` (sections split by `--`)."""
+    args: list[str] = ["agent"]
+    for plan in plans:
+        if len(args) > 1:
+            args.append(HOST_SEPARATOR)
+        args += [plan.service.rsplit("/", 1)[-1], *plan.args]
+    program = console_script("cbdi", "cbdi.cli")
+    return ProcessSpec.of(service, program, args, env, [p.service for p in plans])
 
 
 class _Liveliness:
@@ -147,7 +175,7 @@ async def launch(
     """Run `scenario` to its end and return the summary; never leaves a child behind."""
     summary = RunSummary(scenario=scenario.name)
     endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
-    specs = _specs(scenario, endpoint, opts.record, opts.heartbeat)
+    specs = _specs(scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process)
     procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
@@ -157,7 +185,9 @@ async def launch(
         async with asyncio.TaskGroup() as tg:
             launched = RunLaunched(
                 scenario=scenario.name,
-                services={p.spec.service: list(p.spec.args) for p in procs},
+                services={
+                    p.service: list(p.args) for p in plan_services(scenario, endpoint, opts.record)
+                },
             )
             bus, ends = await _start_all(procs, endpoint, opts, tg, summary, planners, launched)
             await _await_end(bus, ends, procs, scenario, opts, tg, summary)
@@ -233,7 +263,7 @@ async def _start_all(
     for i, group in enumerate([*([p] for p in rest[:singles]), rest[singles:]]):
         if i == singles - 1:  # the monitor (if any) is up, the world not yet: say what runs
             await publish(bus, keys.launcher_stream("run"), launched, block=True)
-        late = sorted((opts.delays.get(p.spec.service, 0.0), i) for i, p in enumerate(group))
+        late = sorted((_delay(opts, p.spec), i) for i, p in enumerate(group))
         waited = 0.0
         for delay, i in late:
             if delay > waited:
@@ -244,6 +274,11 @@ async def _start_all(
         await _wait_alive(live, group, opts)
     summary.result = "running"
     return bus, ends
+
+
+def _delay(opts: LaunchOptions, spec: ProcessSpec) -> float:
+    """Return how late to start a process: the longest delay asked of what it runs."""
+    return max(opts.delays.get(s, 0.0) for s in (spec.service, *spec.members))
 
 
 async def _forward(
@@ -287,7 +322,7 @@ async def _actions(stream: AsyncIterator[tuple[str, Message]], summary: RunSumma
 
 async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: LaunchOptions) -> None:
     """Wait until every process of `group` is alive; fail early if one gives up."""
-    names = [p.spec.service for p in group]
+    names = [member for p in group for member in p.spec.members]
     alive = asyncio.ensure_future(live.wait_for(names, opts.startup_timeout))
     failures = [asyncio.ensure_future(p.failed.wait()) for p in group]
     try:

@@ -43,10 +43,10 @@ async def watch_processes(
 ) -> None:
     """Check the running processes every tick; report and kill each one judged frozen."""
     clock = clock or WallClock()
-    by_service = {p.spec.service: p for p in procs}
+    by_service = {member: p for p in procs for member in p.spec.members}
     while True:
         await clock.sleep(dog.tick)
-        running = {p.spec.service: p.pid for p in procs if p.pid and p.running}
+        running = {m: p.pid for p in procs if p.pid and p.running for m in p.spec.members}
         for frozen in dog.check(clock.now(), running):
             await _act(bus, dog, by_service[frozen.service], frozen)
 

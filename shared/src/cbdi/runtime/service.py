@@ -18,7 +18,7 @@ import math
 import os
 import signal
 import traceback
-from collections.abc import Awaitable, Callable, Coroutine
+from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,7 +34,7 @@ from cbdi.runtime.parent import ParentGuard, guard_parent
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
 
-__all__ = ["ServiceContext", "ServiceSettings", "run_service"]
+__all__ = ["Hosted", "ServiceContext", "ServiceSettings", "run_service", "run_services"]
 
 MAX_PENDING_REPORTS = 1000  # error reports waiting to be published
 
@@ -137,55 +137,96 @@ ServiceMain = Callable[[ServiceContext], Awaitable[None]]
 
 def run_service(settings: ServiceSettings, service: str, main: ServiceMain) -> int:
     """Run a service to completion on uvloop and return its exit code."""
+    return run_services([Hosted(service, settings, main)])
+
+
+@dataclass(frozen=True)
+class Hosted:
+    """One service of a process: its id (`robot1/planner`), settings and body."""
+
+    service: str
+    settings: Any
+    main: ServiceMain
+
+
+def run_services(services: Sequence[Hosted]) -> int:
+    """Run services in one process on one uvloop loop, each on its own bus session with
+    its own liveliness token and heartbeat, until SIGTERM/SIGINT or until one of them
+    ends (then the others are stopped too: the process is their unit of restart).
+
+    Return the first non-zero exit code of any, else 0.
+    """
     guard = guard_parent()
-    try:
-        log = Log(service, level=settings.log_level, fmt=settings.log_format)
-        if not (math.isfinite(settings.heartbeat) and settings.heartbeat >= 0):
-            raise ValueError(f"heartbeat must be a finite number >= 0, got {settings.heartbeat}")
-    except ValueError as exc:
-        print(f"{service}: bad settings: {exc}")
-        return 2
+    logs = []
+    for s in services:
+        try:
+            logs.append(Log(s.service, level=s.settings.log_level, fmt=s.settings.log_format))
+            beat = s.settings.heartbeat
+            if not (math.isfinite(beat) and beat >= 0):
+                raise ValueError(f"heartbeat must be a finite number >= 0, got {beat}")
+        except ValueError as exc:
+            print(f"{s.service}: bad settings: {exc}")
+            return 2
     if guard.orphaned:  # the supervisor died before the guard was set: no signal will come
-        log.warning("orphaned", parent=guard.parent)
+        logs[0].warning("orphaned", parent=guard.parent)
         return 1
-    return uvloop.run(_run(settings, service, main, log, guard))
+    return uvloop.run(_run(services, logs, guard))
 
 
-async def _run(
-    settings: ServiceSettings, service: str, main: ServiceMain, log: Log, guard: ParentGuard
-) -> int:
+async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGuard) -> int:
+    contexts: list[ServiceContext] = []
     try:
-        bus = await open_bus(settings.bus_config())
-    except CbdiError as exc:
-        log.error("bus_open_failed", error=str(exc))
-        return 2
-    ctx = ServiceContext(service, bus, log, settings)
+        for s, log in zip(services, logs, strict=True):
+            try:
+                bus = await open_bus(s.settings.bus_config())
+            except CbdiError as exc:
+                log.error("bus_open_failed", error=str(exc))
+                return 2
+            contexts.append(ServiceContext(s.service, bus, log, s.settings))
+    finally:
+        if len(contexts) < len(services):
+            for ctx in contexts:
+                await ctx.bus.close()
     loop = asyncio.get_running_loop()
 
     def stop() -> None:
         guard.stop_hard_later()  # first: nothing below may keep an orphan alive
-        ctx.stop()
+        for ctx in contexts:
+            ctx.stop(ctx.exit_code)
         if guard.orphaned:
-            log.warning("orphaned", parent=guard.parent, grace=guard.grace)
+            logs[0].warning("orphaned", parent=guard.parent, grace=guard.grace)
 
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop)
     try:
-        await _supervise(ctx, main, settings.heartbeat)
+        async with asyncio.TaskGroup() as tg:
+            for ctx, s in zip(contexts, services, strict=True):
+                tg.create_task(_host(ctx, s.main, contexts), name=ctx.service)
+    finally:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.remove_signal_handler(sig)
+    return next((ctx.exit_code for ctx in contexts if ctx.exit_code), 0)
+
+
+async def _host(ctx: ServiceContext, main: ServiceMain, others: Sequence[ServiceContext]) -> None:
+    """Run one service of the process to its end, then stop the rest of the process."""
+    bus, log = ctx.bus, ctx.log
+    try:
+        await _supervise(ctx, main, ctx.settings.heartbeat)
     except* CbdiError as group:
         for err in group.exceptions:
             log.error("service_failed", error=str(err))
         ctx.exit_code = ctx.exit_code or 1
     finally:
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.remove_signal_handler(sig)
+        for other in others:
+            if other is not ctx:
+                other.stop(other.exit_code)
         await ctx._flush_reports()
         await bus.close()
     for key, count in sorted(bus.sent.items()):
         if not keys.is_heartbeat(key):  # not recorded: counted in `stopped` instead
             log.info("sent", key=key, count=count)
     log.info("stopped", exit_code=ctx.exit_code, **_counter_fields(ctx))
-    return ctx.exit_code
 
 
 async def _supervise(ctx: ServiceContext, main: ServiceMain, heartbeat: float = 0.0) -> None:

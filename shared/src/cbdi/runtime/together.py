@@ -11,23 +11,13 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
 
 from cbdi.bus.memory import MemoryNetwork
 from cbdi.runtime.log import Log
+from cbdi.runtime.service import Hosted as TogetherService  # one service to run
 from cbdi.runtime.service import ServiceContext, ServiceMain, _supervise
 
 __all__ = ["Together", "TogetherService"]
-
-
-@dataclass(frozen=True)
-class TogetherService:
-    """One service to run: its id (`world`, `robot1/planner`), settings and body."""
-
-    service: str
-    settings: Any
-    main: ServiceMain
 
 
 class Together:

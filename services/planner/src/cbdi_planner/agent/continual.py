@@ -347,8 +347,11 @@ class ContinualPlanner:
         self.log("search_from_committed", purpose=purpose, plan=new.plan_id, after=after)
         return []
 
-    def _thread(self, task: Task, state: State, **kw: object) -> SearchThread:
-        return SearchThread(task, state, empty_rounds=self.settings.empty_rounds, **kw)  # type: ignore[arg-type]
+    def _thread(self, task: Task, state: State, prefix: int = 0) -> SearchThread:
+        settings = self.settings
+        return SearchThread(
+            task, state, prefix, empty_rounds=settings.empty_rounds, agenda=settings.agenda
+        )
 
     # -- rounds ---------------------------------------------------------------------------
     def round(self, search: Search, expansions: int | None = None) -> list[Event]:

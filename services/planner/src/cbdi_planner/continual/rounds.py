@@ -7,6 +7,13 @@ incomplete), and `NG`, best-first on every successor (complete). `reroot` moves 
 space's root to a state a round returned (Alg. 2 line 19): the closed list is cleared,
 only open nodes whose plan starts with the new root's plan are kept, and plan sizes
 count from the new root.
+
+With `agenda`, the greedy search climbs to the goal facts one at a time, as the offline
+planner's goal agenda does (`search.goal_agenda`): it aims at the goals reached so far
+plus the nearest one left (lowest relaxed-graph layer), and once a state reaches that
+stage it aims at the next, climbing on from there. Each relaxed plan then stops at the
+stage's goals: cheap and short-sighted in the right way on a big map with many goals.
+The complete search (`NG`) always aims at the whole goal.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from cbdi_planner.expansion import Expander, Node
+from cbdi_planner.search import agenda_stage
 from cbdi_planner.state import State, is_goal
 from cbdi_planner.stn import END
 from cbdi_planner.task import Task
@@ -78,11 +86,16 @@ class SearchSpace:
         mode: str = G,
         epsilon: float = 0.001,
         now: Callable[[], float] = time.monotonic,
+        agenda: bool = False,
     ) -> None:
         if mode not in (G, NG):
             raise ValueError(f"unknown search mode {mode!r} (G or NG)")
         self.task, self.mode, self.now = task, mode, now
+        self.agenda = agenda
         self.expander = Expander(task, epsilon)
+        if state.open:
+            raise ValueError("a search root cannot have running actions")
+        self._aim_at(state)
         self.root = self.expander.root(state)
         self.root_steps = 0  # timeline steps before the root (the prefix cut off)
         self.open: list[tuple[int, int, int, Node]] = []  # NG
@@ -131,6 +144,8 @@ class SearchSpace:
             self._consider(node)  # lines 6-7
             if is_goal(self.task, node.state):  # line 8
                 return self._done("goal", node, expanded, started)
+            if self.expander.subgoal is not None and self.expander.reached(node.state):
+                node = self._next_stage(node)
             if self._bound_hit(bound, self.best, expanded, started):  # lines 9-11
                 # `node` is not expanded yet: it stays open for the next round.
                 self.closed.discard(key)
@@ -141,6 +156,22 @@ class SearchSpace:
         if self.best is not self.root:
             return self._done("best", self.best, expanded, started)
         return self._done("exhausted", None, expanded, started)  # line 16
+
+    def _aim_at(self, state: State) -> None:
+        """Aim the heuristic at the agenda's next stage from `state` (greedy mode with an
+        agenda), else at the whole goal."""
+        greedy = self.agenda and self.mode == G
+        self.expander.aim(agenda_stage(self.expander, state) if greedy else None)
+
+    def _next_stage(self, node: Node) -> Node:
+        """`node` reached the agenda's stage: aim at the next and climb on from `node`,
+        evaluated again (a value under one aim says nothing under another)."""
+        self._aim_at(node.state)
+        node = self.expander.evaluate(node.state, node.timeline, node.running)
+        self.current, self.best = node, node
+        self.queue = deque()
+        self.closed = {node.state.key()}
+        return node
 
     def _consider(self, node: Node) -> None:
         """Lines 6-7: the best state has the lowest h and no running action. Successors
@@ -203,7 +234,10 @@ class SearchSpace:
 
     def restart(self, mode: str, root: Node) -> None:
         """Search again in `mode` from `root` (a node of this space) with empty lists."""
-        self.mode, self.root, self.current = mode, root, root
+        self.mode = mode
+        self._aim_at(root.state)
+        root = self.expander.evaluate(root.state, root.timeline, root.running)
+        self.root, self.current = root, root
         self.root_steps = len(root.timeline.steps)
         self._clear_open()
         self.closed = set()

@@ -140,6 +140,7 @@ class SearchThread:
     empty_rounds: int = 10
     epsilon: float = 0.001
     now: Callable[[], float] = time.monotonic
+    agenda: bool = False  # the greedy search reaches the goal facts one at a time
     mode: str = G
     sent: int = 0
     rounds: int = 0
@@ -148,7 +149,9 @@ class SearchThread:
     plans: list[Plan] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        self.space = SearchSpace(self.task, self.state, mode=G, epsilon=self.epsilon, now=self.now)
+        self.space = SearchSpace(
+            self.task, self.state, mode=G, epsilon=self.epsilon, now=self.now, agenda=self.agenda
+        )
         self.origin = self.space.root
 
     def step(self, bound: RoundBound, committed: int | None = None) -> list[Event]:
