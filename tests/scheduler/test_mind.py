@@ -161,3 +161,34 @@ def test_a_stalled_wait_makes_the_robot_step_aside_then_resume() -> None:
     assert ("recycle", "activated") in [(e.desire, e.event) for e in out.events]
     assert [c.kind for c in out.commands][-1] == "start_search"
     assert not [f for f in mind.beliefs.facts if f[0] == "stalled"]
+
+
+def test_a_requested_desire_is_pursued_and_a_withdrawn_one_dropped() -> None:
+    from cbdi.wire.agent import AgentRequest
+    from cbdi_scheduler.requests import serve_request
+
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0))
+    ask = AgentRequest(
+        from_agent="operator",
+        group="recyclers",
+        op="add_desire",
+        desire="visit",
+        goal=["(in robot1 c_3_3)"],
+        priority=0.9,
+    )
+    assert serve_request(mind, ask).accepted
+    taken = mind.on_percepts(percepts(1))
+    assert [(e.desire, e.event) for e in taken.events] == [
+        ("visit", "added"),
+        ("visit", "activated"),
+    ]
+    assert [c.kind for c in taken.commands] == ["start_search"]
+    remove = AgentRequest(from_agent="operator", group="recyclers", op="del_desire", desire="visit")
+    assert serve_request(mind, remove).accepted
+    gone = mind.on_percepts(percepts(2))
+    assert [(e.desire, e.event, e.reason) for e in gone.events] == [
+        ("visit", "dropped", "removed by operator")
+    ]
+    assert "drop" in [c.kind for c in gone.commands]
+    assert "visit" not in mind.desires and mind.intentions.current is None

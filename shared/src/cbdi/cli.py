@@ -16,6 +16,7 @@ Command = Callable[[Sequence[str] | None], int]
 
 _BUILTIN = {
     "agent": ("cbdi.runtime.host", "run components of an agent in one process"),
+    "ctl": ("cbdi.ctl", "see and change a running agent's beliefs, desires, intentions"),
     "compose": ("cbdi.launcher.compose", "write a compose file running a scenario in containers"),
     "router": ("cbdi.router", "run a Zenoh router"),
     "up": ("cbdi.launcher.cli", "run a scenario: router, world and agents as processes"),

@@ -8,6 +8,7 @@ the field (`rules[0].then[1].boost.goal[0]`) and what is wrong.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,14 @@ from cbdi_scheduler.knowledge import available
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect
 
-__all__ = ["AgentFile", "AgentFileError", "PlanningSettings", "load_agent", "parse_agent"]
+__all__ = [
+    "AgentFile",
+    "AgentFileError",
+    "PlanningSettings",
+    "load_agent",
+    "parse_agent",
+    "undeclared",
+]
 
 # Re-exported: the common parts of agent files live in the common library.
 _SHARED = (AgentFileError, PlanningSettings)
@@ -56,6 +64,10 @@ class AgentFile:
     desires: tuple[Desire, ...] = ()
     rules: tuple[ReactiveRule, ...] = ()
     planning: PlanningSettings = field(default_factory=PlanningSettings)
+    # The domain's predicates and functions with their arities, and the file's private
+    # predicates: what beliefs, goals and conditions may name (requests are checked too).
+    signature: Mapping[str, int] = field(default_factory=dict)
+    private_predicates: frozenset[str] = frozenset()
 
 
 def load_agent(path: str | Path, agent: str) -> AgentFile:
@@ -103,7 +115,27 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         ),
         rules=tuple(r.rule(x, f"rules[{i}]") for i, x in enumerate(r.opt(data, "rules", list, []))),
         planning=raw.planning,
+        signature=r.signature,
+        private_predicates=r.private,
     )
+
+
+def undeclared(
+    belief: Belief, signature: Mapping[str, int], private: frozenset[str], goal: bool = False
+) -> str:
+    """Say why `belief` names nothing the domain declares with that arity (nor, outside
+    goals, a private predicate); "" when it does."""
+    if belief.kind == INSTANCE:
+        return ""
+    arity = signature.get(belief.name)
+    if arity is None:
+        if not goal and belief.name in private:
+            return ""
+        where_else = "" if goal else " nor in private_predicates"
+        return f"{belief.name!r} is not declared by the domain{where_else}"
+    if len(belief.params) != arity:
+        return f"{belief.name!r} takes {arity} argument(s), got {len(belief.params)}"
+    return ""
 
 
 def _knowledge(name: str, source: str) -> str:
@@ -177,18 +209,9 @@ class _Reader:
     def declared(self, belief: Belief, where: str, goal: bool = False) -> Belief:
         """Fail unless the domain declares `belief`'s predicate or function (with its
         arity), or, outside goals, the file lists it in `private_predicates`."""
-        if belief.kind == INSTANCE:
-            return belief
-        arity = self.signature.get(belief.name)
-        if arity is None:
-            if not goal and belief.name in self.private:
-                return belief
-            where_else = "" if goal else " nor in private_predicates"
-            raise self.fail(where, f"{belief.name!r} is not declared by the domain{where_else}")
-        if len(belief.params) != arity:
-            raise self.fail(
-                where, f"{belief.name!r} takes {arity} argument(s), got {len(belief.params)}"
-            )
+        why = undeclared(belief, self.signature, self.private, goal)
+        if why:
+            raise self.fail(where, why)
         return belief
 
     def table(self, data: dict[str, Any], key: str) -> dict[str, Any]:

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from cbdi.beliefs import BeliefSet, fact
+from cbdi.beliefs import Belief, BeliefSet, fact
 from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
 from cbdi.wire.world import ActionOutcome, Percepts
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
-from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
+from cbdi_scheduler.desires import Desire, Drop, achieved, drops, select_desire
 from cbdi_scheduler.intentions import Command, IntentionScheduler
 from cbdi_scheduler.knowledge import DomainKnowledge, load_knowledge
 from cbdi_scheduler.rules import fire_rules
@@ -48,6 +48,9 @@ class Mind:
         self.now = 0.0
         self.epoch = -1
         self.refire = False  # fire the rules next cycle even if nothing changed
+        # What requests changed between cycles: events to publish, desires to withdraw.
+        self.requested: list[DesireEvent] = []
+        self.withdrawn: dict[str, str] = {}  # desire -> reason
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
@@ -66,6 +69,8 @@ class Mind:
         before = self.beliefs
         self.beliefs = self.knowledge.on_percepts(self.beliefs, p)
         out = Reaction(beliefs_changed=self.beliefs != before)
+        out.events += self.requested
+        self.requested = []
         if out.beliefs_changed or self.epoch == 0 or self.refire:
             # After a drop the rules fire again even on unchanged beliefs: what made the
             # desire (litter still lying there) may well make it again.
@@ -82,6 +87,21 @@ class Mind:
             out.claims += stalled.claims
         self._believe_stalled()
         return out
+
+    # -- requests (another agent, an operator) -------------------------------------------
+    def request_desire(self, desire: Desire) -> None:
+        """Hold `desire` from now (a request); the next cycle may pursue it."""
+        self.desires[desire.name] = desire
+        self.requested.append(self.event(desire, "added"))
+
+    def withdraw(self, name: str, reason: str) -> None:
+        """Drop desire `name` at the next cycle (a request), stopping its intention."""
+        self.withdrawn[name] = reason
+
+    def request_beliefs(self, add: list[Belief], remove: list[Belief]) -> None:
+        """Believe `add` and stop believing `remove` (a request); the rules fire again."""
+        self.beliefs = self.beliefs.removing(remove).adding(add)
+        self.refire = True
 
     def _believe_stalled(self) -> None:
         """Believe `(stalled DESIRE)` while the intention's blocked wait is stalled, so a
@@ -132,7 +152,14 @@ class Mind:
         active = cur.desire.name if cur else None
         executing = cur is not None and bool(cur.plan_id)
         rtc = self.spec.rtc_deadline
-        for drop in drops(self.desires, self.beliefs, self.now, active, executing, rtc):
+        asked, self.withdrawn = self.withdrawn, {}
+        dropping = [Drop(n, why) for n, why in sorted(asked.items()) if n in self.desires]
+        dropping += [
+            d
+            for d in drops(self.desires, self.beliefs, self.now, active, executing, rtc)
+            if d.desire not in asked
+        ]
+        for drop in dropping:
             desire = self.desires.pop(drop.desire)
             self._dropped(desire, drop.reason, out)
             if drop.desire == active:

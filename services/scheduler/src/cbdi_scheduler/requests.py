@@ -1,15 +1,29 @@
-"""Requests from other agents: check or add beliefs and desires, for allowed groups only."""
+"""Requests from other agents and operators: check, add or remove beliefs and desires,
+for allowed groups only; and the agent's state, for anyone who may read it.
+
+Every literal is read as agent files read it and checked against the domain (a
+predicate the domain lacks is refused, naming it); `{self}` stands for the agent.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+from cbdi.beliefs import Belief
 from cbdi.wire.agent import AgentReply, AgentRequest
+from cbdi_scheduler.agentfile import undeclared
+from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
-from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief
+from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
 from cbdi_scheduler.mind import Mind
 
 __all__ = ["OPS", "serve_request"]
 
-OPS = ("check_belief", "add_belief", "check_desire", "add_desire")
+OPS = ("check_belief", "add_belief", "del_belief", "check_desire", "add_desire", "del_desire")
+
+
+class _Refused(Exception):
+    """A request that cannot be served; the message is the reason."""
 
 
 def serve_request(mind: Mind, req: AgentRequest) -> AgentReply:
@@ -19,19 +33,73 @@ def serve_request(mind: Mind, req: AgentRequest) -> AgentReply:
     if req.op not in OPS:
         return AgentReply(accepted=False, reason=f"unknown op {req.op!r} (known: {', '.join(OPS)})")
     try:
-        if req.op == "check_belief":
-            return AgentReply(accepted=True, holds=mind.beliefs.holds(parse_belief(req.belief)))
-        if req.op == "add_belief":
-            mind.beliefs = mind.beliefs.adding([parse_belief(req.belief)])
-            return AgentReply(accepted=True, holds=True)
-        if req.op == "check_desire":
-            return AgentReply(accepted=True, holds=req.desire in mind.desires)
-        goal = tuple(parse_belief(g) for g in req.goal)
-    except LiteralSyntaxError as exc:
+        return _serve(mind, req)
+    except _Refused as exc:
         return AgentReply(accepted=False, reason=str(exc))
-    if not req.desire or not goal:
-        return AgentReply(accepted=False, reason="add_desire needs a desire name and a goal")
+
+
+def _serve(mind: Mind, req: AgentRequest) -> AgentReply:
+    if req.op == "check_desire":
+        return AgentReply(accepted=True, holds=req.desire in mind.desires)
+    if req.op == "del_desire":
+        if req.desire not in mind.desires:
+            held = ", ".join(sorted(mind.desires)) or "none"
+            raise _Refused(f"no desire {req.desire!r} is held (held: {held})")
+        mind.withdraw(req.desire, f"removed by {req.from_agent}")
+        return AgentReply(accepted=True, holds=True)
+    if req.op != "add_desire":
+        belief = _belief(mind, req.belief, "belief")
+        if req.op == "check_belief":
+            return AgentReply(accepted=True, holds=mind.beliefs.holds(belief))
+        adding = req.op == "add_belief"
+        mind.request_beliefs([belief] if adding else [], [] if adding else [belief])
+        return AgentReply(accepted=True, holds=adding)
+    if not req.desire or not req.goal:
+        raise _Refused("add_desire needs a desire name and a goal")
+    if req.desire in mind.desires:
+        raise _Refused(f"a desire {req.desire!r} is already held")
+    goal = tuple(_belief(mind, g, f"goal[{i}]", goal=True) for i, g in enumerate(req.goal))
     deadline = req.deadline if req.deadline > 0 else NO_DEADLINE
-    desire = Desire(req.desire, goal, req.priority, deadline).due(mind.now)
-    mind.desires.setdefault(desire.name, desire)
+    desire = Desire(
+        req.desire,
+        goal,
+        req.priority,
+        deadline,
+        precondition=_condition(mind, req.precondition, "precondition"),
+        context=_condition(mind, req.context, "context"),
+    )
+    mind.request_desire(desire.due(mind.now))
     return AgentReply(accepted=True, holds=True)
+
+
+def _text(mind: Mind, text: str) -> str:
+    return text.replace("{self}", mind.agent)
+
+
+def _belief(mind: Mind, text: str, where: str, goal: bool = False) -> Belief:
+    try:
+        belief = parse_belief(_text(mind, text))
+    except (LiteralSyntaxError, ValueError) as exc:
+        raise _Refused(f"{where}: {exc}") from None
+    _check_declared(mind, belief, where, goal)
+    return belief
+
+
+def _check_declared(mind: Mind, belief: Belief, where: str, goal: bool = False) -> None:
+    spec = mind.spec
+    why = undeclared(belief, spec.signature, spec.private_predicates, goal)
+    if why and spec.signature:  # an agent file read without its domain checks nothing
+        raise _Refused(f"{where}: {why}")
+
+
+def _condition(mind: Mind, clauses: Sequence[Sequence[str]], where: str) -> Condition:
+    out = []
+    for i, clause in enumerate(clauses):
+        try:
+            literals = tuple(parse_literal(_text(mind, t)) for t in clause)
+        except (LiteralSyntaxError, ValueError) as exc:
+            raise _Refused(f"{where}[{i}]: {exc}") from None
+        for j, lit in enumerate(literals):
+            _check_declared(mind, lit.belief, f"{where}[{i}][{j}]")
+        out.append(literals)
+    return tuple(out)

@@ -26,10 +26,12 @@ from cbdi.view import world_info
 from cbdi.wire.agent import (
     ActionStatus,
     AgentRequest,
+    AgentState,
     ArrestReport,
     Claim,
     EarlyArrest,
     PartialPlan,
+    StateRequest,
 )
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
@@ -37,6 +39,7 @@ from cbdi.wire.world import ActionOutcome, EpochAck, Percepts, Tick
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
 from cbdi_scheduler.requests import serve_request
+from cbdi_scheduler.state import PlanLog, agent_state
 
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
 
@@ -75,6 +78,7 @@ class SchedulerService:
         self.last_search: SearchRequest | None = None  # resent when the planner (re)appears
         self.ack_timeout = ack_timeout
         self.beliefs_out = BeliefsSender(self.agent)  # what changed, every epoch
+        self.plan_log = PlanLog()  # the executing plan's steps, for `on_state`
         self.members: list[str] = []  # the world's lockstep members (from its info)
         self.lockstep = Lockstep(
             self.input_keys(),
@@ -217,6 +221,10 @@ class SchedulerService:
         )
         return reply
 
+    async def on_state(self, key: str, req: StateRequest) -> AgentState:
+        """Tell what the agent believes, desires and intends now (`cbdi ctl show`)."""
+        return agent_state(self.mind, self.plan_log, req.beliefs)
+
     def react(self, msg: Message) -> Reaction:
         mind = self.mind
         if isinstance(msg, Percepts):
@@ -230,6 +238,7 @@ class SchedulerService:
                 return mind.on_search_failed(msg.reason, msg.blocked)
             return Reaction()
         if isinstance(msg, ActionStatus):
+            self.plan_log.reported(msg)
             return mind.on_status(msg)
         if isinstance(msg, Claim):
             return mind.on_claim(msg)
@@ -282,6 +291,8 @@ class SchedulerService:
             self.last_search = None
             return SearchRequest(agent=a, request_id=request_id, kind="cancel")
         if c.kind == "execute" and c.plan is not None:
+            cur = self.mind.intentions.current
+            self.plan_log.sent(c.plan, cur.steps if cur is not None else [])
             return c.plan
         if c.kind == "arrest":
             return EarlyArrest(agent=a, plan_id=c.plan_id, after_step=c.after_step)
@@ -296,6 +307,10 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         rpc = keys.component_rpc(mind.agent, "scheduler", "request")
         ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
+        state = keys.component_rpc(mind.agent, "scheduler", "state")
+        ctx.start(
+            serve(ctx.bus, state, StateRequest, service.on_state, ctx, trace=False), name="state"
+        )  # read-only: not recorded (a watching operator would flood the recording)
         ctx.start(service.run(stream, settings.load_map), name="scheduler")
         ctx.start(service.watch_planner(), name="planner-watch")
         ctx.start(service.watch_executor(), name="executor-watch")

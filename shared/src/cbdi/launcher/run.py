@@ -258,6 +258,7 @@ async def _start_all(
         tg.create_task(watch_processes(bus, dog, procs))
     await _wait_alive(live, [router], opts)
     await _router_is_ours(router, endpoint, opts)
+    router.sink("launcher", f"router endpoint={endpoint}")  # for `cbdi ctl --connect`
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1
     for i, group in enumerate([*([p] for p in rest[:singles]), rest[singles:]]):

@@ -32,23 +32,36 @@ __all__ = [
     "ActionStatus",
     "AgentReply",
     "AgentRequest",
+    "AgentState",
     "ArrestReport",
     "BeliefsUpdate",
     "Check",
     "CheckOp",
     "Claim",
+    "Condition",
     "DesireEvent",
+    "DesireView",
     "EarlyArrest",
+    "IntentionView",
     "PartialPlan",
     "PlanStep",
     "RequestOp",
+    "StateRequest",
     "StepStatus",
+    "StepView",
 ]
 
 StepStatus = Literal["waiting", "running", "succeeded", "failed", "refused", "cancelled"]
 STEP_STATUSES: tuple[str, ...] = get_args(StepStatus)
 CheckOp = Literal["T", "F", "EQ", "NE", "LT", "LE", "GT", "GE"]
-RequestOp = Literal["check_belief", "add_belief", "check_desire", "add_desire"]
+RequestOp = Literal[
+    "check_belief", "add_belief", "del_belief", "check_desire", "add_desire", "del_desire"
+]
+# A condition as agent files write it: clauses (any one holding will do) of literals
+# (all must hold), e.g. `[["(holding {self} pla61)"], ["(map_loaded)"]]`.
+Condition = Annotated[
+    list[Annotated[list[Text], msgspec.Meta(max_length=100)]], msgspec.Meta(max_length=100)
+]
 
 
 class Check(Message, frozen=True, tag="cbdi.agent.Check/1"):
@@ -168,11 +181,13 @@ class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
 
 
 class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
-    """Another agent asks to check or add a belief or a desire of this agent.
+    """Another agent or an operator asks to check, add or remove a belief or a desire.
 
-    `op` is `check_belief`, `add_belief`, `check_desire` or `add_desire`; beliefs and goal
-    literals are written as in agent files (`(litter_pose pla61 c_6_1)`). It is served only
-    if `group` is one of this agent's allowed groups.
+    `op` is `check_belief`, `add_belief`, `del_belief`, `check_desire`, `add_desire` or
+    `del_desire`; beliefs, goal literals and condition literals are written as in agent
+    files (`(litter_pose pla61 c_6_1)`, `(not (holding {self} *))`). It is served only
+    if `group` is one of this agent's allowed groups. `deadline` is relative to the
+    time the desire is added (0: none).
     """
 
     from_agent: AgentName
@@ -183,6 +198,8 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     goal: Annotated[list[Text], msgspec.Meta(max_length=1000)] = []
     priority: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.5
     deadline: NonNegative = 0.0
+    precondition: Condition = []
+    context: Condition = []
 
 
 class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
@@ -191,6 +208,53 @@ class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
     accepted: bool
     holds: bool = False
     reason: Text = ""
+
+
+class StateRequest(Message, frozen=True, tag="cbdi.agent.StateRequest/1"):
+    """Ask an agent's scheduler what it believes, desires and intends now."""
+
+    beliefs: bool = True  # False: leave the belief set out (it can be large)
+
+
+class DesireView(Message, frozen=True, tag="cbdi.agent.DesireView/1"):
+    """One desire as the agent holds it: goal, priority, deadline (None: none)."""
+
+    name: Symbol
+    goal: Annotated[list[Text], msgspec.Meta(max_length=MAX_ITEMS)]
+    priority: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+    deadline: NonNegative | None = None
+    precondition: Condition = []
+    context: Condition = []
+
+
+class StepView(Message, frozen=True, tag="cbdi.agent.StepView/1"):
+    """One step of the executing plan and its last reported status ("" none yet)."""
+
+    step_id: Symbol
+    action: Text  # `(move robot1 c_0_0 c_0_1)`
+    start: Finite
+    duration: NonNegative
+    status: Id = ""
+
+
+class IntentionView(Message, frozen=True, tag="cbdi.agent.IntentionView/1"):
+    """The intention: the desire pursued, its plan (if any yet) and how it is going."""
+
+    desire: Symbol
+    plan_id: Id = ""
+    steps: Many[StepView] = []
+    waiting: bool = False  # its goal is blocked by something that moves
+    stopping: bool = False  # an early arrest is under way
+
+
+class AgentState(Message, frozen=True, tag="cbdi.agent.AgentState/1"):
+    """An agent's mind at simulated `time`: beliefs, desires, intention."""
+
+    agent: AgentName
+    time: Finite
+    beliefs: Annotated[list[Text], msgspec.Meta(max_length=MAX_ITEMS)] = []
+    desires: Annotated[list[DesireView], msgspec.Meta(max_length=10_000)] = []
+    intention: IntentionView | None = None
 
 
 class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):

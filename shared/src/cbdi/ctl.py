@@ -1,0 +1,272 @@
+"""`cbdi ctl`: the operator's command line for running agents.
+
+    cbdi ctl show robot1 [--watch 1] [--no-beliefs] [--json]
+    cbdi ctl desire add robot1 visit "(in robot1 c_3_3)" --priority 0.9 --deadline 60 \\
+        [--precondition "(map_loaded)"] [--context "(not (holding robot1 pla1))"]
+    cbdi ctl desire remove robot1 visit          cbdi ctl desire check robot1 visit
+    cbdi ctl belief add robot1 "(recycled pla1)"   (also remove, check)
+
+Every change goes through the agent's multi-agent request endpoint (its scheduler's
+`rpc/request`), as another agent's would, under `--group` (default `operator`, which the
+agent file must list in `allowed_groups`). Each `--precondition` or `--context` flag is
+one clause, a list of literals that must all hold; any one clause holding will do.
+
+Exit codes: 0 accepted (for `check`: it holds), 1 refused with the reason (for `check`:
+it does not hold), 2 bad usage, 3 no answer (no router, no such agent running).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import sys
+from collections.abc import Sequence
+
+import msgspec
+
+from cbdi import keys
+from cbdi.bus import Bus, BusConfig, open_bus, request
+from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT
+from cbdi.errors import CbdiError
+from cbdi.wire.agent import AgentReply, AgentRequest, AgentState, StateRequest
+
+__all__ = ["format_state", "main", "split_literals"]
+
+EXIT_OK, EXIT_REFUSED, EXIT_USAGE, EXIT_NO_ANSWER = 0, 1, 2, 3
+
+
+class UsageError(ValueError):
+    """A command line that does not read; the message says what is wrong."""
+
+
+def split_literals(text: str) -> list[str]:
+    """Split `(a b) (not (c d))` into its top-level literals."""
+    out, depth, start = [], 0, -1
+    for i, ch in enumerate(text):
+        if ch == "(":
+            if depth == 0:
+                start = i
+            depth += 1
+        elif ch == ")":
+            depth -= 1
+            if depth < 0:
+                raise UsageError(f"{text!r}: ')' at {i + 1} closes nothing")
+            if depth == 0:
+                out.append(text[start : i + 1])
+        elif depth == 0 and not ch.isspace():
+            raise UsageError(f"{text!r}: expected literals like (in robot1 c_1_1), got {ch!r}")
+    if depth:
+        raise UsageError(f"{text!r}: missing ')'")
+    if not out:
+        raise UsageError("expected at least one literal, like (in robot1 c_1_1)")
+    return out
+
+
+def format_state(state: AgentState) -> str:
+    """Render an agent's state for a terminal."""
+    lines = [f"{state.agent} at t={state.time:g}"]
+    cur = state.intention
+    if cur is None:
+        lines.append("intention: none")
+    else:
+        flags = "".join(
+            f" [{f}]" for f, on in (("waiting", cur.waiting), ("stopping", cur.stopping)) if on
+        )
+        plan = f" (plan {cur.plan_id})" if cur.plan_id else " (no plan yet)"
+        lines.append(f"intention: {cur.desire}{plan}{flags}")
+        for s in cur.steps:
+            status = s.status or "sent"
+            lines.append(f"  {s.start:8.3f} [{s.duration:g}] {s.action}  {status}")
+    lines.append(f"desires ({len(state.desires)}):")
+    for d in state.desires:
+        mark = "*" if cur is not None and cur.desire == d.name else " "
+        deadline = "none" if d.deadline is None else f"{d.deadline:g}"
+        lines.append(f" {mark} {d.name}  priority {d.priority:g}  deadline {deadline}")
+        lines.append(f"      goal {' '.join(d.goal)}")
+        for what, condition in (("precondition", d.precondition), ("context", d.context)):
+            if condition:
+                clauses = " or ".join("[" + " ".join(c) + "]" for c in condition)
+                lines.append(f"      {what} {clauses}")
+    if state.beliefs:
+        lines.append(f"beliefs ({len(state.beliefs)}):")
+        lines += [f"  {b}" for b in state.beliefs]
+    return "\n".join(lines)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="cbdi ctl",
+        description="See and change a running agent's beliefs, desires and intentions.",
+        epilog="Exit: 0 accepted (check: holds), 1 refused (check: does not hold), "
+        "2 bad usage, 3 no answer.",
+    )
+    _common(p, argparse.ArgumentParser(add_help=False))
+    sub = p.add_subparsers(dest="what", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    _common(common, None)
+
+    def leaf(parent: argparse._SubParsersAction, name: str, text: str) -> argparse.ArgumentParser:  # type: ignore[type-arg]
+        return parent.add_parser(name, help=text, parents=[common])  # type: ignore[no-any-return]
+
+    show = leaf(sub, "show", "an agent's beliefs, desires, intention and plan")
+    show.add_argument("agent")
+    show.add_argument("--watch", type=float, default=0.0, metavar="SECONDS", help="repeat")
+    show.add_argument("--no-beliefs", action="store_true", help="leave the beliefs out")
+    show.add_argument("--json", action="store_true", help="JSON, one object per line")
+
+    desire = sub.add_parser("desire", help="add, remove or check a desire")
+    dsub = desire.add_subparsers(dest="op", required=True)
+    add = leaf(dsub, "add", "add a desire")
+    add.add_argument("agent")
+    add.add_argument("name")
+    add.add_argument("goal", nargs="+", help="goal literals, e.g. '(in robot1 c_3_3)'")
+    add.add_argument("--priority", type=float, default=0.5, help="0 to 1 (default 0.5)")
+    add.add_argument("--deadline", type=float, default=0.0, help="seconds from now (0: none)")
+    add.add_argument("--precondition", action="append", default=[], metavar="CLAUSE")
+    add.add_argument("--context", action="append", default=[], metavar="CLAUSE")
+    for op in ("remove", "check"):
+        one = leaf(dsub, op, f"{op} a desire")
+        one.add_argument("agent")
+        one.add_argument("name")
+
+    belief = sub.add_parser("belief", help="add, remove or check a belief")
+    bsub = belief.add_subparsers(dest="op", required=True)
+    for op in ("add", "remove", "check"):
+        one = leaf(bsub, op, f"{op} a belief")
+        one.add_argument("agent")
+        one.add_argument("belief", help="e.g. '(recycled pla1)'")
+    return p
+
+
+def _common(p: argparse.ArgumentParser, top: object) -> None:
+    """The options every subcommand takes, before or after it (`top`: the top level,
+    which holds the defaults; after the subcommand a flag given overrides them)."""
+    default = (lambda v: v) if top is not None else (lambda v: argparse.SUPPRESS)
+    p.add_argument(
+        "--connect",
+        action="append",
+        default=default(None),
+        help=f"Zenoh endpoint (repeatable; default $CBDI_CONNECT or {DEFAULT_ENDPOINT})",
+    )
+    p.add_argument("--group", default=default("operator"), help="the group asked under")
+    p.add_argument("--from", dest="sender", default=default("operator"), help="who asks")
+    p.add_argument(
+        "--timeout", type=float, default=default(5.0), help="seconds to wait for an answer"
+    )
+
+
+_OPS = {
+    ("desire", "add"): "add_desire",
+    ("desire", "remove"): "del_desire",
+    ("desire", "check"): "check_desire",
+    ("belief", "add"): "add_belief",
+    ("belief", "remove"): "del_belief",
+    ("belief", "check"): "check_belief",
+}
+
+
+def build_request(args: argparse.Namespace) -> AgentRequest:
+    """Turn parsed `desire`/`belief` arguments into the request (UsageError if bad)."""
+    op = _OPS[(args.what, args.op)]
+    fields: dict[str, object] = {}
+    if args.what == "belief":
+        fields["belief"] = args.belief
+    else:
+        fields["desire"] = args.name
+    if op == "add_desire":
+        if not 0.0 <= args.priority <= 1.0:
+            raise UsageError(f"--priority must be between 0 and 1, got {args.priority:g}")
+        if not 0.0 <= args.deadline < float("inf"):
+            raise UsageError(f"--deadline must be a finite number >= 0, got {args.deadline:g}")
+        fields |= {
+            "goal": [lit for g in args.goal for lit in split_literals(g)],
+            "priority": args.priority,
+            "deadline": args.deadline,
+            "precondition": [split_literals(c) for c in args.precondition],
+            "context": [split_literals(c) for c in args.context],
+        }
+    try:
+        return AgentRequest(from_agent=args.sender, group=args.group, op=op, **fields)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _validate(args: argparse.Namespace) -> None:
+    for name, what in ((args.agent, "agent"), (args.sender, "--from")):
+        try:
+            keys.validate_name(name, "agent" if what == "agent" else "sender")
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    if not args.group:
+        raise UsageError("--group must not be empty")
+    if not (0 < args.timeout < float("inf")):
+        raise UsageError(f"--timeout must be a number of seconds above 0, got {args.timeout:g}")
+
+
+async def _show(bus: Bus, args: argparse.Namespace) -> int:
+    key = keys.component_rpc(args.agent, "scheduler", "state")
+    ask = StateRequest(beliefs=not args.no_beliefs)
+    while True:
+        state = await request(bus, key, ask, AgentState, timeout=args.timeout)
+        if args.json:
+            print(msgspec.json.encode(msgspec.to_builtins(state)).decode(), flush=True)
+        else:
+            clear = "\x1b[H\x1b[2J" if args.watch and sys.stdout.isatty() else ""
+            print(clear + format_state(state) + ("\n" if args.watch else ""), flush=True)
+        if not args.watch:
+            return EXIT_OK
+        await asyncio.sleep(args.watch)
+
+
+async def _ask(bus: Bus, args: argparse.Namespace, req: AgentRequest) -> int:
+    key = keys.component_rpc(args.agent, "scheduler", "request")
+    reply = await request(bus, key, req, AgentReply, timeout=args.timeout)
+    if not reply.accepted:
+        print(f"refused: {reply.reason}", file=sys.stderr)
+        return EXIT_REFUSED
+    if args.op == "check":
+        print("holds" if reply.holds else "does not hold")
+        return EXIT_OK if reply.holds else EXIT_REFUSED
+    print("accepted")
+    return EXIT_OK
+
+
+async def _run(args: argparse.Namespace, req: AgentRequest | None) -> int:
+    connect = args.connect or os.environ.get("CBDI_CONNECT", DEFAULT_ENDPOINT).split(",")
+    bus = await open_bus(BusConfig(connect=tuple(connect), connect_timeout=args.timeout))
+    try:
+        return await (_show(bus, args) if req is None else _ask(bus, args, req))
+    finally:
+        await bus.close()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run `cbdi ctl`; return its exit code."""
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0) and EXIT_USAGE
+    try:
+        _validate(args)
+        req = None if args.what == "show" else build_request(args)
+    except UsageError as exc:
+        print(f"cbdi ctl: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        return asyncio.run(_run(args, req))
+    except KeyboardInterrupt:
+        return EXIT_OK
+    except (CbdiError, TimeoutError) as exc:
+        where = keys.component_rpc(args.agent, "scheduler", "state" if req is None else "request")
+        print(
+            f"cbdi ctl: no answer from {args.agent}'s scheduler ({where}): {exc or 'timed out'}"
+            " (is the agent running, and --connect its router?)",
+            file=sys.stderr,
+        )
+        return EXIT_NO_ANSWER
+
+
+if __name__ == "__main__":
+    sys.exit(main())

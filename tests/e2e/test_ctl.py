@@ -1,0 +1,97 @@
+"""The operator's command line against a running agent (real Zenoh, real processes):
+a desire added with `cbdi ctl` is pursued, one removed is dropped, a refused one says
+why, and `show` tells the intention and its plan."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from cbdi import keys
+from cbdi.wire import decode
+from cbdi.wire.agent import DesireEvent
+from cbdi_monitor.reader import read_messages
+from tests_support import BIN, Proc, free_port, wait_for
+
+pytestmark = pytest.mark.e2e
+
+
+def ctl(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
+    argv = [str(BIN / "cbdi"), "ctl", *args, "--connect", endpoint, "--timeout", "20"]
+    return subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
+
+
+def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
+    port, rec = free_port(), tmp_path / "ctl.mcap"
+    endpoint = f"tcp/127.0.0.1:{port}"
+    argv = [str(BIN / "cbdi"), "up", "paper-7x7", "--port", str(port), "--json", "--quiet"]
+    launcher = Proc([*argv, "--speed", "1", "--record", str(rec)], tmp_path / "up.log")
+    try:
+        wait_for(
+            lambda: "started service=robot1/executor" in launcher.output(),
+            timeout=60,
+            what="the run to start",
+        )
+        wait_for(
+            lambda: ctl(endpoint, "show", "robot1", "--no-beliefs").returncode == 0,
+            timeout=60,
+            what="robot1's scheduler to answer",
+        )
+        # (0, 6) is off the people's loops: nobody stands on the goal for long.
+        visit = ctl(
+            endpoint,
+            "desire",
+            "add",
+            "robot1",
+            "visit",
+            "(in {self} c_0_6)",
+            "--priority",
+            "0.95",
+            "--deadline",
+            "300",
+            "--context",
+            "(map_loaded)",
+        )
+        assert visit.returncode == 0 and "accepted" in visit.stdout, visit.stderr
+        later = ctl(endpoint, "desire", "add", "robot1", "later", "(in robot1 c_6_6)")
+        assert later.returncode == 0, later.stderr
+        assert ctl(endpoint, "desire", "check", "robot1", "later").stdout.strip() == "holds"
+        removed = ctl(endpoint, "desire", "remove", "robot1", "later")
+        assert removed.returncode == 0, removed.stderr
+
+        stranger = ctl(endpoint, "--group", "strangers", "belief", "add", "robot1", "(map_loaded)")
+        assert stranger.returncode == 1 and "group 'strangers' is not allowed" in stranger.stderr
+        typo = ctl(endpoint, "desire", "add", "robot1", "typo", "(inn robot1 c_0_6)")
+        assert typo.returncode == 1 and "'inn' is not declared by the domain" in typo.stderr
+        ghost = ctl(endpoint, "desire", "remove", "robot1", "ghost")
+        assert ghost.returncode == 1 and "no desire 'ghost'" in ghost.stderr
+
+        def pursuing() -> bool:
+            shown = ctl(endpoint, "show", "robot1", "--no-beliefs", "--json")
+            state = json.loads(shown.stdout) if shown.returncode == 0 else {}
+            intention = state.get("intention") or {}
+            return intention.get("desire") == "visit" and bool(intention.get("steps"))
+
+        wait_for(pursuing, timeout=60, what="robot1 to pursue the operator's desire")
+        text = ctl(endpoint, "show", "robot1")
+        assert text.returncode == 0 and "intention: visit (plan " in text.stdout
+        assert "(move robot1 " in text.stdout and "beliefs (" in text.stdout
+        wait_for(lambda: not launcher.alive(), timeout=240, what="the run to end")
+    finally:
+        code = launcher.stop()
+    assert code == 0, launcher.output()[-3000:]  # all litter recycled, as asked
+
+    events = [
+        decode(m.payload, DesireEvent)
+        for m in read_messages(rec)
+        if m.key == keys.scheduler_desires("robot1")
+    ]
+    ends = ("added", "activated", "achieved", "dropped")  # "waiting": a person passed by
+    visit_events = [e.event for e in events if e.desire == "visit" and e.event in ends]
+    assert visit_events[:3] == ["added", "activated", "achieved"], visit_events
+    later_events = [(e.event, e.reason) for e in events if e.desire == "later"]
+    assert later_events == [("added", ""), ("dropped", "removed by operator")], later_events
+    assert not [e for e in events if e.desire in ("typo", "ghost")]
