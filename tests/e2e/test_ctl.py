@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import json
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
 
 from cbdi import keys
 from cbdi.wire import decode
-from cbdi.wire.agent import DesireEvent
+from cbdi.wire.agent import ActionStatus, ArrestReport, DesireEvent
 from cbdi_monitor.reader import read_messages
 from tests_support import BIN, Proc, free_port, wait_for
 
@@ -79,19 +80,42 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
         text = ctl(endpoint, "show", "robot1")
         assert text.returncode == 0 and "intention: visit (plan " in text.stdout
         assert "(move robot1 " in text.stdout and "beliefs (" in text.stdout
+
+        stop = ctl(endpoint, "stop", "--all", "--wait", "60")
+        assert stop.returncode == 0 and "robot1 stopped at t=" in stop.stdout, stop.stderr
+        shown = json.loads(ctl(endpoint, "show", "robot1", "--no-beliefs", "--json").stdout)
+        assert shown["halted"] and shown["intention"]["desire"] == "visit"
+        time.sleep(3)  # stopped: nothing starts meanwhile
+        assert ctl(endpoint, "resume", "robot1").returncode == 0
         wait_for(lambda: not launcher.alive(), timeout=240, what="the run to end")
     finally:
         code = launcher.stop()
     assert code == 0, launcher.output()[-3000:]  # all litter recycled, as asked
 
-    events = [
-        decode(m.payload, DesireEvent)
-        for m in read_messages(rec)
-        if m.key == keys.scheduler_desires("robot1")
-    ]
+    recorded = list(read_messages(rec))
+
+    def of(key: str, cls: type) -> list:
+        return [decode(m.payload, cls) for m in recorded if m.key == key]
+
+    events = of(keys.scheduler_desires("robot1"), DesireEvent)
     ends = ("added", "activated", "achieved", "dropped")  # "waiting": a person passed by
     visit_events = [e.event for e in events if e.desire == "visit" and e.event in ends]
     assert visit_events[:3] == ["added", "activated", "achieved"], visit_events
     later_events = [(e.event, e.reason) for e in events if e.desire == "later"]
     assert later_events == [("added", ""), ("dropped", "removed by operator")], later_events
     assert not [e for e in events if e.desire in ("typo", "ghost")]
+
+    # The safe stop: the step running at the stop ended (a 3 s pickup at most), and no
+    # step started until the resume.
+    halted = next(e.time for e in events if e.desire == "visit" and e.event == "halted")
+    resumed = next(e.time for e in events if e.desire == "visit" and e.event == "resumed")
+    still = min(
+        r.time for r in of(keys.executor_arrested("robot1"), ArrestReport) if r.time >= halted
+    )
+    assert halted <= still <= halted + 4 < resumed
+    started = [
+        s.time
+        for s in of(keys.executor_status("robot1"), ActionStatus)
+        if s.status == "running" and still < s.time < resumed
+    ]
+    assert not started, started

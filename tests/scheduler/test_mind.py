@@ -192,3 +192,49 @@ def test_a_requested_desire_is_pursued_and_a_withdrawn_one_dropped() -> None:
     ]
     assert "drop" in [c.kind for c in gone.commands]
     assert "visit" not in mind.desires and mind.intentions.current is None
+
+
+def test_a_safe_stop_keeps_the_intention_and_its_deadline_until_resumed() -> None:
+    from cbdi.wire.agent import AgentRequest
+    from cbdi_scheduler.requests import serve_request
+
+    def ask(op: str) -> AgentRequest:
+        return AgentRequest(from_agent="operator", group="operator", op=op)  # type: ignore[arg-type]
+
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    steps = [
+        PlanStep(step_id=i, action="move", args=["robot1", "c_0_1", "c_1_1"], start=t, duration=1)
+        for i, t in (("a", 0), ("b", 1))
+    ]
+    mind.on_plan(PartialPlan(agent="robot1", plan_id="p1", baseline="", steps=steps))
+    running = ActionStatus(
+        agent="robot1",
+        plan_id="p1",
+        step_id="a",
+        action="move",
+        status="running",
+        reason="",
+        time=0,
+    )
+    mind.on_status(running)
+    assert "not halted" in serve_request(mind, ask("resume")).reason
+    assert serve_request(mind, ask("halt")).accepted
+    stop = mind.on_percepts(percepts(1, [("pla1", (1, 1))]))
+    assert [(c.kind, c.after_step) for c in stop.commands] == [
+        ("cancel_search", ""),
+        ("arrest", "a"),
+    ]
+    assert [(e.desire, e.event) for e in stop.events] == [("recycle", "halted")]
+    late = PartialPlan(agent="robot1", plan_id="p2", baseline="p1", steps=steps)
+    assert mind.on_plan(late).commands == []  # nothing new starts
+    report = ArrestReport(agent="robot1", plan_id="p1", last_step="a", time=1.0, cancelled=["b"])
+    assert mind.on_arrested(report).commands == []
+    held = mind.on_percepts(percepts(100, [("pla1", (1, 1))]))  # past the deadline (64)
+    assert not [e for e in held.events if e.event == "dropped"] and "recycle" in mind.desires
+    assert serve_request(mind, ask("resume")).accepted
+    go = mind.on_percepts(percepts(101, [("pla1", (1, 1))]))
+    assert [(c.kind, c.reason) for c in go.commands] == [("start_search", "resumed")]
+    assert [(e.desire, e.event) for e in go.events] == [("recycle", "resumed")]
+    assert mind.desires["recycle"].deadline == 64 + 100  # it waited the 100 s stopped
+    assert mind.intentions.current is not None and not mind.intentions.halted

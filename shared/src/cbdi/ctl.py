@@ -5,6 +5,12 @@
         [--precondition "(map_loaded)"] [--context "(not (holding robot1 pla1))"]
     cbdi ctl desire remove robot1 visit          cbdi ctl desire check robot1 visit
     cbdi ctl belief add robot1 "(recycled pla1)"   (also remove, check)
+    cbdi ctl stop robot1 [robot2 ...] | --all      cbdi ctl resume robot1 | --all
+
+`stop` is a safe stop: each agent cancels its search, lets the step running now end (a
+durative action is not broken off midway), starts nothing more and keeps its intention
+and desires, whose deadlines wait; the command returns once every executor is still
+(within `--wait` seconds). `resume` plans the intention again from the beliefs of then.
 
 Every change goes through the agent's multi-agent request endpoint (its scheduler's
 `rpc/request`), as another agent's would, under `--group` (default `operator`, which the
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
 import sys
 from collections.abc import Sequence
@@ -29,7 +36,7 @@ from cbdi import keys
 from cbdi.bus import Bus, BusConfig, open_bus, request
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT
 from cbdi.errors import CbdiError
-from cbdi.wire.agent import AgentReply, AgentRequest, AgentState, StateRequest
+from cbdi.wire.agent import AgentReply, AgentRequest, AgentState, RequestOp, StateRequest
 
 __all__ = ["format_state", "main", "split_literals"]
 
@@ -136,6 +143,13 @@ def _parser() -> argparse.ArgumentParser:
         one = leaf(bsub, op, f"{op} a belief")
         one.add_argument("agent")
         one.add_argument("belief", help="e.g. '(recycled pla1)'")
+    for op, text in (("stop", "stop agents safely"), ("resume", "resume stopped agents")):
+        one = leaf(sub, op, text)
+        one.add_argument("agents", nargs="*", metavar="AGENT")
+        one.add_argument("--all", action="store_true", help="every agent running now")
+        one.add_argument(
+            "--wait", type=float, default=30.0, help="stop: seconds to wait for stillness"
+        )
     return p
 
 
@@ -193,9 +207,15 @@ def build_request(args: argparse.Namespace) -> AgentRequest:
 
 
 def _validate(args: argparse.Namespace) -> None:
-    for name, what in ((args.agent, "agent"), (args.sender, "--from")):
+    if args.what in ("stop", "resume"):
+        if bool(args.agents) == args.all:
+            raise UsageError(f"{args.what}: name the agents, or give --all")
+        if not (0 < args.wait < float("inf")):
+            raise UsageError(f"--wait must be a number of seconds above 0, got {args.wait:g}")
+    names = [("agent", n) for n in getattr(args, "agents", None) or [getattr(args, "agent", "")]]
+    for what, name in [*([] if getattr(args, "all", False) else names), ("sender", args.sender)]:
         try:
-            keys.validate_name(name, "agent" if what == "agent" else "sender")
+            keys.validate_name(name, what)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     if not args.group:
@@ -232,10 +252,65 @@ async def _ask(bus: Bus, args: argparse.Namespace, req: AgentRequest) -> int:
     return EXIT_OK
 
 
+async def _agents(bus: Bus, seconds: float = 1.0) -> list[str]:
+    """The agents whose schedulers are alive now (their liveliness tokens)."""
+    found: set[str] = set()
+
+    async def collect() -> None:
+        async for event in bus.watch_alive(keys.alive(keys.service_id("scheduler", "*"))):
+            if event.alive:
+                found.add(keys.service_of_alive(event.key).split("/")[0])
+
+    with contextlib.suppress(TimeoutError):
+        await asyncio.wait_for(collect(), seconds)
+    return sorted(found)
+
+
+async def _stop(bus: Bus, args: argparse.Namespace) -> int:
+    agents = args.agents or await _agents(bus)
+    if not agents:
+        print("cbdi ctl: no agent is running", file=sys.stderr)
+        return EXIT_NO_ANSWER
+    op: RequestOp = "halt" if args.what == "stop" else "resume"
+    req = AgentRequest(from_agent=args.sender, group=args.group, op=op)
+    code = EXIT_OK
+    for agent in agents:
+        key = keys.component_rpc(agent, "scheduler", "request")
+        reply = await request(bus, key, req, AgentReply, timeout=args.timeout)
+        if not reply.accepted:
+            print(f"{agent}: refused: {reply.reason}", file=sys.stderr)
+            code = EXIT_REFUSED
+    if args.what == "resume" or code:
+        if not code:
+            print("resumed " + " ".join(agents))
+        return code
+    try:
+        async with asyncio.timeout(args.wait):
+            for agent in agents:
+                state = await _still(bus, agent, args.timeout)
+                print(f"{agent} stopped at t={state.time:g}")
+    except TimeoutError:
+        print(f"cbdi ctl: not all still within {args.wait:g} s", file=sys.stderr)
+        return EXIT_NO_ANSWER
+    return EXIT_OK
+
+
+async def _still(bus: Bus, agent: str, timeout: float) -> AgentState:
+    """Wait until `agent` is halted and its executor has stopped."""
+    key = keys.component_rpc(agent, "scheduler", "state")
+    while True:
+        state = await request(bus, key, StateRequest(beliefs=False), AgentState, timeout=timeout)
+        if state.halted and not (state.intention and state.intention.stopping):
+            return state
+        await asyncio.sleep(0.1)
+
+
 async def _run(args: argparse.Namespace, req: AgentRequest | None) -> int:
     connect = args.connect or os.environ.get("CBDI_CONNECT", DEFAULT_ENDPOINT).split(",")
     bus = await open_bus(BusConfig(connect=tuple(connect), connect_timeout=args.timeout))
     try:
+        if args.what in ("stop", "resume"):
+            return await _stop(bus, args)
         return await (_show(bus, args) if req is None else _ask(bus, args, req))
     finally:
         await bus.close()
@@ -250,7 +325,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exc.code or 0) and EXIT_USAGE
     try:
         _validate(args)
-        req = None if args.what == "show" else build_request(args)
+        req = None if args.what in ("show", "stop", "resume") else build_request(args)
     except UsageError as exc:
         print(f"cbdi ctl: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -259,9 +334,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return EXIT_OK
     except (CbdiError, TimeoutError) as exc:
-        where = keys.component_rpc(args.agent, "scheduler", "state" if req is None else "request")
+        who = getattr(args, "agent", None) or "an agent"
         print(
-            f"cbdi ctl: no answer from {args.agent}'s scheduler ({where}): {exc or 'timed out'}"
+            f"cbdi ctl: no answer from {who}'s scheduler: {exc or 'timed out'}"
             " (is the agent running, and --connect its router?)",
             file=sys.stderr,
         )

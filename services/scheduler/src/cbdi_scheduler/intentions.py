@@ -78,10 +78,13 @@ class IntentionScheduler:
         self.next_desire: Desire | None = None  # waits for a clean preemption
         self.stopping = False
         self.retry_reason = ""  # a failed search waits for the beliefs to change
+        self.halted = False  # a safe stop: nothing starts until `resume`
 
     # -- desires -------------------------------------------------------------------------
     def choose(self, desire: Desire | None) -> list[Command]:
         """React to the goal reasoner's choice (None: nothing to pursue)."""
+        if self.halted:
+            return []
         cur = self.current
         if desire is None or (cur is not None and desire.name == cur.desire.name):
             return self._revise(desire) if desire is not None else []
@@ -125,11 +128,36 @@ class IntentionScheduler:
         self.stopping = True
         return [Command("arrest", plan_id=cur.plan_id, after_step=cur.last_started)]
 
+    # -- a safe stop ---------------------------------------------------------------------
+    def halt(self) -> list[Command]:
+        """Stop safely: cancel the search, let the running step end and start nothing
+        more, keep the intention (and every desire) for `resume`."""
+        if self.halted:
+            return []
+        self.halted = True
+        self.pending, self.next_desire, self.retry_reason = [], None, ""
+        cur = self.current
+        if cur is None:
+            return []
+        cur.waiting = cur.stalled = False
+        return [Command("cancel_search", cur.desire, reason="halted"), *self._arrest_now()]
+
+    def resume(self, now: float = 0.0) -> list[Command]:
+        """Go on after a safe stop: plan the intention again from the beliefs of now."""
+        if not self.halted:
+            return []
+        self.halted = self.stopping = False
+        cur = self.current
+        if cur is None:
+            return []
+        cur.plan_id, cur.steps, cur.last_started, cur.quiet_since = "", [], "", now
+        return [Command("start_search", cur.desire, reason="resumed")]
+
     # -- the planner ---------------------------------------------------------------------
     def on_plan(self, plan: PartialPlan) -> list[Command]:
         """A partial plan arrived: pass it on, or replace the executing plan safely."""
         cur = self.current
-        if cur is None:
+        if cur is None or self.halted:
             return []
         if not cur.plan_id or plan.baseline == cur.plan_id or plan.plan_id == cur.plan_id:
             return self._pass_on(plan)
@@ -166,7 +194,7 @@ class IntentionScheduler:
         does not count: the intention waits (a `wait` command the first time).
         """
         cur = self.current
-        if cur is None:
+        if cur is None or self.halted:
             return []
         if blocked:
             self.retry_reason = f"retry after: {reason}"
@@ -189,7 +217,7 @@ class IntentionScheduler:
     def retry(self, now: float = 0.0) -> list[Command]:
         """The beliefs changed: start the search a failed planning is waiting for."""
         cur = self.current
-        if cur is None or not self.retry_reason:
+        if cur is None or not self.retry_reason or self.halted:
             return []
         reason, self.retry_reason = self.retry_reason, ""
         cur.quiet_since = now
@@ -221,7 +249,7 @@ class IntentionScheduler:
             return []
         if status.status == "running":
             cur.last_started = status.step_id
-        if status.status not in ("failed", "refused"):
+        if status.status not in ("failed", "refused") or self.halted:
             return []
         if self.pending:
             # A replacement was waiting for this plan to stop, and now it has (the
@@ -239,6 +267,10 @@ class IntentionScheduler:
     def on_arrested(self, report: ArrestReport) -> list[Command]:
         """The executor stopped: pass the waiting plan on, or start the preempting desire."""
         self.stopping = False
+        if self.halted:
+            if self.current is not None and report.plan_id == self.current.plan_id:
+                self.current.plan_id, self.current.steps = "", []
+            return []
         if self.next_desire is not None:
             desire, self.next_desire = self.next_desire, None
             self.current = None

@@ -51,6 +51,8 @@ class Mind:
         # What requests changed between cycles: events to publish, desires to withdraw.
         self.requested: list[DesireEvent] = []
         self.withdrawn: dict[str, str] = {}  # desire -> reason
+        self.stop_asked: bool | None = None  # a safe stop (True) or a resume (False) asked
+        self.halted_at = 0.0  # when the safe stop began: deadlines wait meanwhile
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
@@ -77,6 +79,7 @@ class Mind:
             self.refire = False
             self._fire(out)
         self._coordinate(out)
+        self._stop_or_resume(out)
         self._deliberate(out)
         if out.beliefs_changed:
             out.commands += self.intentions.retry(self.now)
@@ -97,6 +100,29 @@ class Mind:
     def withdraw(self, name: str, reason: str) -> None:
         """Drop desire `name` at the next cycle (a request), stopping its intention."""
         self.withdrawn[name] = reason
+
+    def request_stop(self, stop: bool) -> None:
+        """Stop safely (or resume) at the next cycle (a request)."""
+        self.stop_asked = stop
+
+    def _stop_or_resume(self, out: Reaction) -> None:
+        asked, self.stop_asked = self.stop_asked, None
+        intentions = self.intentions
+        if asked is None or asked == intentions.halted:
+            return
+        cur = intentions.current
+        if asked:
+            self.halted_at = self.now
+            out.commands += intentions.halt()
+        else:
+            # The agent's time stood still: every deadline moves on by the stop's length.
+            paused = self.now - self.halted_at
+            self.desires = {n: _postponed(d, paused) for n, d in self.desires.items()}
+            if cur is not None:
+                cur.desire = _postponed(cur.desire, paused)
+            out.commands += intentions.resume(self.now)
+        if cur is not None:
+            out.events.append(self.event(cur.desire, "halted" if asked else "resumed"))
 
     def request_beliefs(self, add: list[Belief], remove: list[Belief]) -> None:
         """Believe `add` and stop believing `remove` (a request); the rules fire again."""
@@ -154,11 +180,12 @@ class Mind:
         rtc = self.spec.rtc_deadline
         asked, self.withdrawn = self.withdrawn, {}
         dropping = [Drop(n, why) for n, why in sorted(asked.items()) if n in self.desires]
-        dropping += [
-            d
-            for d in drops(self.desires, self.beliefs, self.now, active, executing, rtc)
-            if d.desire not in asked
-        ]
+        if not self.intentions.halted:  # a stopped agent's deadlines wait
+            dropping += [
+                d
+                for d in drops(self.desires, self.beliefs, self.now, active, executing, rtc)
+                if d.desire not in asked
+            ]
         for drop in dropping:
             desire = self.desires.pop(drop.desire)
             self._dropped(desire, drop.reason, out)
@@ -267,3 +294,7 @@ class Mind:
             self._dropped(desire, reason, out)
             if self.intentions.current is not None and self.intentions.current.desire.name == name:
                 out.commands += self.intentions.drop(reason)
+
+
+def _postponed(desire: Desire, seconds: float) -> Desire:
+    return replace(desire, deadline=desire.deadline + seconds) if seconds > 0 else desire

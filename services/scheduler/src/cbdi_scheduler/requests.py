@@ -19,7 +19,16 @@ from cbdi_scheduler.mind import Mind
 
 __all__ = ["OPS", "serve_request"]
 
-OPS = ("check_belief", "add_belief", "del_belief", "check_desire", "add_desire", "del_desire")
+OPS = (
+    "check_belief",
+    "add_belief",
+    "del_belief",
+    "check_desire",
+    "add_desire",
+    "del_desire",
+    "halt",
+    "resume",
+)
 
 
 class _Refused(Exception):
@@ -39,6 +48,12 @@ def serve_request(mind: Mind, req: AgentRequest) -> AgentReply:
 
 
 def _serve(mind: Mind, req: AgentRequest) -> AgentReply:
+    if req.op in ("halt", "resume"):
+        stop = req.op == "halt"
+        if not stop and not mind.intentions.halted and not mind.stop_asked:
+            raise _Refused("not halted: nothing to resume")
+        mind.request_stop(stop)
+        return AgentReply(accepted=True, holds=stop)
     if req.op == "check_desire":
         return AgentReply(accepted=True, holds=req.desire in mind.desires)
     if req.op == "del_desire":

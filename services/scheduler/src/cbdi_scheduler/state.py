@@ -106,4 +106,5 @@ def agent_state(mind: Mind, log: PlanLog, beliefs: bool = True) -> AgentState:
         beliefs=sorted(str(b) for b in mind.beliefs.beliefs()) if beliefs else [],
         desires=[_desire(d) for _, d in sorted(mind.desires.items())],
         intention=intention,
+        halted=mind.intentions.halted,
     )

@@ -55,7 +55,14 @@ StepStatus = Literal["waiting", "running", "succeeded", "failed", "refused", "ca
 STEP_STATUSES: tuple[str, ...] = get_args(StepStatus)
 CheckOp = Literal["T", "F", "EQ", "NE", "LT", "LE", "GT", "GE"]
 RequestOp = Literal[
-    "check_belief", "add_belief", "del_belief", "check_desire", "add_desire", "del_desire"
+    "check_belief",
+    "add_belief",
+    "del_belief",
+    "check_desire",
+    "add_desire",
+    "del_desire",
+    "halt",
+    "resume",
 ]
 # A condition as agent files write it: clauses (any one holding will do) of literals
 # (all must hold), e.g. `[["(holding {self} pla61)"], ["(map_loaded)"]]`.
@@ -183,9 +190,11 @@ class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
 class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     """Another agent or an operator asks to check, add or remove a belief or a desire.
 
-    `op` is `check_belief`, `add_belief`, `del_belief`, `check_desire`, `add_desire` or
-    `del_desire`; beliefs, goal literals and condition literals are written as in agent
-    files (`(litter_pose pla61 c_6_1)`, `(not (holding {self} *))`). It is served only
+    `op` is `check_belief`, `add_belief`, `del_belief`, `check_desire`, `add_desire`,
+    `del_desire`, or `halt` (a safe stop: the running step ends, nothing more starts,
+    every desire is kept and its deadline waits) and `resume`; beliefs, goal literals and
+    condition literals are written as in agent files (`(litter_pose pla61 c_6_1)`,
+    `(not (holding {self} *))`). It is served only
     if `group` is one of this agent's allowed groups. `deadline` is relative to the
     time the desire is added (0: none).
     """
@@ -255,6 +264,7 @@ class AgentState(Message, frozen=True, tag="cbdi.agent.AgentState/1"):
     beliefs: Annotated[list[Text], msgspec.Meta(max_length=MAX_ITEMS)] = []
     desires: Annotated[list[DesireView], msgspec.Meta(max_length=10_000)] = []
     intention: IntentionView | None = None
+    halted: bool = False  # a safe stop holds (`stopping` in the intention: not yet still)
 
 
 class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
