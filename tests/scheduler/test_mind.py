@@ -238,3 +238,35 @@ def test_a_safe_stop_keeps_the_intention_and_its_deadline_until_resumed() -> Non
     assert [(e.desire, e.event) for e in go.events] == [("recycle", "resumed")]
     assert mind.desires["recycle"].deadline == 64 + 100  # it waited the 100 s stopped
     assert mind.intentions.current is not None and not mind.intentions.halted
+
+
+def test_an_idle_robot_on_its_way_home_past_a_bin_is_not_turned_back() -> None:
+    """make_way (next to a bin) used to outrank go_home: a way home along a bin sent the
+    robot back, then home again, for ever (seen on campus-30x30 with 8 robots)."""
+    mind = Mind(load_agent(AGENT, "robot1"))
+    cells = [f"c_{x}_0" for x in range(6)]
+    mind.beliefs = mind.beliefs.adding(
+        [
+            instance("bin1", "bin"),
+            fact("bin_pose", "bin1", "c_0_0"),
+            fact("home", "robot1", "c_5_0"),
+        ]
+        + [fact("near", a, b) for a, b in zip(cells, cells[1:])]
+        + [fact("near", b, a) for a, b in zip(cells, cells[1:])]
+    )
+    seen = Percepts(
+        agent="robot1",
+        epoch=0,
+        time=0.0,
+        position=(1, 0),
+        depth=1,
+        free=[(2, 0)],
+        blocked=[(0, 0)],
+        holding=[],
+        litter=[],
+    )
+    out = mind.on_percepts(seen)
+    assert {"make_way", "go_home"} <= set(mind.desires)
+    assert [(e.desire, e.event) for e in out.events if e.event == "activated"] == [
+        ("go_home", "activated")
+    ]
