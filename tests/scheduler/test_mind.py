@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
 from pathlib import Path
 
 from cbdi.beliefs import fact, instance
@@ -18,6 +19,7 @@ def percepts(
     litter: list[tuple[str, tuple[int, int]]] = (),  # type: ignore[assignment]
     holding: list[str] = (),
     position: tuple[int, int] = (0, 1),
+    free: tuple[tuple[int, int], ...] = ((1, 1),),
 ) -> Percepts:  # type: ignore[assignment]
     return Percepts(
         agent="robot1",
@@ -25,7 +27,7 @@ def percepts(
         time=float(epoch),
         position=position,
         depth=1,
-        free=[(1, 1)],
+        free=list(free),
         blocked=[(0, 0)],
         holding=list(holding),
         litter=[LitterView(name=n, cell=c) for n, c in litter],
@@ -151,7 +153,8 @@ def test_a_stalled_wait_makes_the_robot_step_aside_then_resume() -> None:
     events = []
     for epoch in range(1, 12):  # the person waits for the robot: nothing changes
         events += [
-            (epoch, e.desire, e.event) for e in mind.on_percepts(percepts(epoch, LITTER)).events
+            (epoch, e.desire, e.event)
+            for e in mind.on_percepts(percepts(epoch, LITTER, free=((1, 1), (0, 2)))).events
         ]
     assert (9, "step_aside", "added") in events and (9, "step_aside", "activated") in events
     assert not [e for e in events if e[1] == "recycle" and e[2] == "dropped"]
@@ -251,8 +254,8 @@ def test_an_idle_robot_on_its_way_home_past_a_bin_is_not_turned_back() -> None:
             fact("bin_pose", "bin1", "c_0_0"),
             fact("home", "robot1", "c_5_0"),
         ]
-        + [fact("near", a, b) for a, b in zip(cells, cells[1:])]
-        + [fact("near", b, a) for a, b in zip(cells, cells[1:])]
+        + [fact("near", a, b) for a, b in pairwise(cells)]
+        + [fact("near", b, a) for a, b in pairwise(cells)]
     )
     seen = Percepts(
         agent="robot1",
@@ -260,7 +263,7 @@ def test_an_idle_robot_on_its_way_home_past_a_bin_is_not_turned_back() -> None:
         time=0.0,
         position=(1, 0),
         depth=1,
-        free=[(2, 0)],
+        free=[(2, 0), (3, 0), (4, 0), (5, 0)],  # all sensed: nothing to explore
         blocked=[(0, 0)],
         holding=[],
         litter=[],
@@ -270,3 +273,25 @@ def test_an_idle_robot_on_its_way_home_past_a_bin_is_not_turned_back() -> None:
     assert [(e.desire, e.event) for e in out.events if e.event == "activated"] == [
         ("go_home", "activated")
     ]
+
+
+def test_a_rule_binds_the_precondition_of_the_desire_it_adds() -> None:
+    """make_way's precondition `(in {self} {c})` was kept unbound: any cell matched, so
+    the desire stayed selectable after the robot left and robots turned back to it."""
+    mind = Mind(load_agent(AGENT, "robot1"))
+    cells = ["c_0_0", "c_0_1", "c_0_2"]
+    mind.beliefs = mind.beliefs.adding(
+        [
+            instance("bin1", "bin"),
+            fact("bin_pose", "bin1", "c_0_0"),
+            fact("home", "robot1", "c_0_1"),
+        ]
+        + [fact("near", a, b) for a, b in pairwise(cells)]
+        + [fact("near", b, a) for a, b in pairwise(cells)]
+    )
+    mind.on_percepts(percepts(0, position=(0, 1), free=((0, 2),)))
+    make_way = mind.desires["make_way"]
+    (clause,) = make_way.precondition
+    assert [str(lit.belief) for lit in clause] == ["(in robot1 c_0_1)"]
+    away = mind.on_percepts(percepts(1, position=(0, 2), free=((0, 1),)))
+    assert ("make_way", "achieved") in [(e.desire, e.event) for e in away.events]

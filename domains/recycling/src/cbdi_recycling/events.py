@@ -24,6 +24,7 @@ __all__ = [
     "Distances",
     "cell_name",
     "distance",
+    "exploration_target",
     "map_beliefs",
     "revise_from_outcome",
     "revise_from_percepts",
@@ -213,3 +214,17 @@ class Distances:
 def distance(beliefs: BeliefSet, agent: str, item: str) -> float:
     """Return the believed path length from `agent` to litter `item` (one search)."""
     return Distances(keep=1)(beliefs, agent, item)
+
+
+def exploration_target(
+    lengths: dict[str, int], sensed: Collection[str], bins: Collection[str]
+) -> str | None:
+    """Return the nearest cell (path length, then name) never sensed that a robot can
+    stand on, from the path `lengths` of its cell; None when it has sensed them all."""
+    best: tuple[int, str] | None = None
+    for cell, steps in lengths.items():
+        if cell in sensed or cell in bins:
+            continue
+        if best is None or (steps, cell) < best:
+            best = (steps, cell)
+    return None if best is None else best[1]

@@ -3,21 +3,31 @@
 Percepts become beliefs as `events` says (cells seen free or blocked, litter seen,
 what the robot holds), with obstacles out of sight remembered a while; a claim on a
 litter item costs the believed path length to it (`events.Distances`, each search kept).
+Exploration: the robot remembers every cell it has sensed. Once it has stood still for
+`EXPLORE_AFTER` seconds with nothing in hand, and from then until it picks something up,
+it believes `(explore_target CELL)`, the nearest cell it never sensed (kept until
+sensed), so the recycler's `explore` rule sends an idle robot to find litter nobody has
+seen yet. Waiting first keeps robots that are done for a moment (the others finishing,
+a short mission) out of the others' way.
 """
 
 from __future__ import annotations
 
-from cbdi.beliefs import Belief, BeliefSet
+from cbdi.beliefs import Belief, BeliefSet, fact
 from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
 from cbdi_recycling.events import (
     Distances,
+    cell_name,
+    exploration_target,
     map_beliefs,
     revise_from_outcome,
     revise_from_percepts,
     seen_blocked,
 )
 
-__all__ = ["RecyclingKnowledge"]
+__all__ = ["EXPLORE_AFTER", "RecyclingKnowledge"]
+
+EXPLORE_AFTER = 10.0  # simulated seconds standing still, hands empty, before exploring
 
 
 class RecyclingKnowledge:
@@ -27,13 +37,42 @@ class RecyclingKnowledge:
         self.agent = agent
         self.distances = Distances()
         self.blocked: dict[str, float] = {}  # cell -> when last seen blocked
+        self.sensed: set[str] = set()  # every cell sensed so far
+        self.target: str | None = None  # where exploring goes next
+        self.at: tuple[str, float] = ("", 0.0)  # the robot's cell, and since when
+        self.exploring = False
 
     def map_beliefs(self, info: WorldInfo) -> list[Belief]:
         return map_beliefs(info)
 
     def on_percepts(self, beliefs: BeliefSet, percepts: Percepts) -> BeliefSet:
         self.blocked = seen_blocked(self.blocked, percepts)
-        return revise_from_percepts(beliefs, percepts, blocked=self.blocked)
+        revised = revise_from_percepts(beliefs, percepts, blocked=self.blocked)
+        here = cell_name(percepts.position)
+        self.sensed |= {cell_name(c) for c in (*percepts.free, *percepts.blocked)} | {here}
+        if here != self.at[0]:
+            self.at = (here, percepts.time)
+        if percepts.holding:
+            self.exploring = False
+        elif percepts.time - self.at[1] >= EXPLORE_AFTER:
+            self.exploring = True
+        return self._explore(revised, here)
+
+    def _explore(self, beliefs: BeliefSet, here: str) -> BeliefSet:
+        """Believe `(explore_target CELL)`: the nearest cell never sensed, kept until it
+        is sensed (then the next nearest), or none once all were."""
+        if not self.exploring:
+            self.target = None
+        elif self.target is None or self.target in self.sensed:
+            bins = {f[2] for f in beliefs.facts_of("bin_pose")}
+            self.target = exploration_target(
+                self.distances.lengths(beliefs, here), self.sensed, bins
+            )
+        want = {("explore_target", self.target)} if self.target else set()
+        have = set(beliefs.facts_of("explore_target"))
+        if want == have:
+            return beliefs
+        return beliefs.removing(fact(*f) for f in have - want).adding(fact(*f) for f in want - have)
 
     def on_outcome(self, beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:
         return revise_from_outcome(beliefs, outcome)

@@ -25,7 +25,15 @@ from cbdi_scheduler.conditions import (
     substitute_belief,
 )
 
-__all__ = ["Desire", "Drop", "achieved", "boosted", "drops", "select_desire"]
+__all__ = [
+    "Desire",
+    "Drop",
+    "achieved",
+    "boosted",
+    "bound_condition",
+    "drops",
+    "select_desire",
+]
 
 NO_DEADLINE = float("inf")
 
@@ -49,16 +57,27 @@ class Desire:
         return self.deadline + (rtc_deadline - 1.0) * self.span
 
     def bound(self, binding: Binding) -> Desire:
-        """Return this desire with `binding` substituted in its name and goal."""
+        """Return this desire with `binding` substituted in its name, goal, precondition
+        and context (a variable the binding lacks stays a pattern to match)."""
         return replace(
             self,
             name=substitute(self.name, binding),
             goal=tuple(substitute_belief(g, binding) for g in self.goal),
+            precondition=bound_condition(self.precondition, binding),
+            context=bound_condition(self.context, binding),
         )
 
     def due(self, now: float) -> Desire:
         """Return this desire held from `now`: a relative deadline becomes absolute."""
         return replace(self, deadline=now + self.deadline, span=self.deadline)
+
+
+def bound_condition(condition: Condition, binding: Binding) -> Condition:
+    """Return `condition` with `binding` substituted in its literals."""
+    return tuple(
+        tuple(replace(lit, belief=substitute_belief(lit.belief, binding)) for lit in clause)
+        for clause in condition
+    )
 
 
 def boosted(desire: Desire, extra: Iterable[Belief], deadline: float | None = None) -> Desire:
