@@ -218,3 +218,65 @@ def test_an_unbound_action_is_refused_not_crashed() -> None:
     d.load(plan("p", PlanStep(step_id="z", action="fly", args=["r"], start=0, duration=1)), 0)
     out = start(d, 0.0, FREE)
     assert statuses(out) == [("z", "refused")] and "no action" in out.statuses[0].reason
+
+
+def test_a_replacement_follows_the_step_it_applies_after_with_no_gap() -> None:
+    """Plan q applies after s1: s1 (waiting) still runs, s2 is cancelled, and q's first
+    step starts as soon as s1 ends, with no early arrest in between."""
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0), move(2, 2.0)), 0)
+    first = start(d, 0.0)
+    repair = PartialPlan(
+        agent="r", plan_id="q", baseline="s1", steps=[move(3, 2.0)], applies_after="s1"
+    )
+    out = d.load(repair, 0.5)
+    assert statuses(out) == [("s2", "cancelled"), ("s3", "waiting")]
+    assert [s.step.step_id for s in d.steps] == ["s0", "s1", "s3"]
+    finish(d, first, 1.0)
+    second = start(d, 1.0)
+    assert second.requests[0].target == (2, 0)  # s1, kept
+    finish(d, second, 2.0)
+    third = start(d, 2.0, FREE.adding([fact("free", "c_4_0")]))
+    assert third.requests and third.requests[0].target == (4, 0)  # q's step, at once
+    assert statuses(third) == [("s3", "running")]
+
+
+def test_a_replacement_that_comes_too_late_is_refused() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
+    finish(d, start(d, 0.0), 1.0)
+    start(d, 1.0)  # s1 runs: a plan meant to follow s0 comes too late
+    late = PartialPlan(
+        agent="r",
+        plan_id="q",
+        baseline="s0",
+        steps=[move(5, 1.0), move(6, 2.0)],
+        applies_after="s0",
+    )
+    out = d.load(late, 1.5)
+    assert ("s5", "refused") in statuses(out) and ("s6", "cancelled") in statuses(out)
+    refused = next(s for s in out.statuses if s.status == "refused")
+    assert "too late" in refused.reason and "s1 started" in refused.reason
+    assert d.running() is not None and d.running().step.step_id == "s1"  # it goes on
+
+
+def test_an_arrest_after_a_kept_step_stops_the_replacement_too() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
+    first = start(d, 0.0)
+    d.load(
+        PartialPlan(
+            agent="r", plan_id="q", baseline="s0", steps=[move(1, 1.0)], applies_after="s0"
+        ),
+        0.2,
+    )
+    assert d.early_arrest("q", "s0", 0.5).arrest is None  # s0 runs
+    done = finish(d, first, 1.0)
+    assert done.arrest is not None and done.arrest.last_step == "s0"
+    assert start(d, 1.0).requests == []
+    # An arrest after no step at all starts nothing more.
+    d2 = Dispatcher("r")
+    d2.load(plan("p", move(0, 0.0), move(1, 1.0)), 0)
+    report = d2.early_arrest("p", "", 0.0).arrest
+    assert report is not None and report.cancelled == ["s0", "s1"]
+    assert start(d2, 0.0).requests == []

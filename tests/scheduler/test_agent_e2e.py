@@ -109,6 +109,8 @@ async def test_agent_pursues_its_desire_to_the_end(
     from cbdi_monitor.view import convert
 
     robot = inspect_messages(read_messages(recording)).agents["robot1"]
-    # Two goals: recycling, then making way from the bin (its search gets no plan here).
-    assert (robot.plans, robot.goals_achieved, robot.moves) == (1, 2, 6)
+    # Two goals at least: recycling, then making way from the bin (its search gets no
+    # plan here). The test sends its plan in wall time: while it is on its way, the idle
+    # robot may also come to explore (and reach) a cell it passes.
+    assert (robot.plans, robot.moves) == (1, 6) and robot.goals_achieved >= 2
     assert convert(recording, tmp_path / "agent.rrd") > 0

@@ -55,14 +55,19 @@ def test_continuations_are_passed_on() -> None:
     assert s.current is not None and s.current.steps == ["s1", "s2", "s3"]
 
 
-def test_a_repair_replaces_the_queue_after_an_early_arrest() -> None:
+def test_a_repair_is_passed_on_at_once_and_follows_the_steps_it_keeps() -> None:
+    """No early arrest and no wait for its report: the executor runs the old plan up to
+    `applies_after`, then the repair, with no idle epoch between them."""
     s = running()
     out = s.on_plan(plan("r1", "t1", baseline="committed", after="s1"))
-    assert kinds(out) == ["arrest"] and (out[0].plan_id, out[0].after_step) == ("p1", "s1")
-    done = s.on_arrested(arrested("p1", "s1"))
-    assert kinds(done) == ["execute"] and done[0].plan is not None
-    assert done[0].plan.plan_id == "r1"
-    assert s.current is not None and s.current.plan_id == "r1"
+    assert kinds(out) == ["execute"] and out[0].plan is not None
+    assert out[0].plan.plan_id == "r1" and out[0].plan.applies_after == "s1"
+    assert s.current is not None and s.current.plan_id == "r1" and not s.stopping
+    # The kept step of the old plan still runs: its status counts, its failure replans.
+    assert s.on_status(status("p1", "s2", "cancelled", "replaced by plan r1")) == []
+    failed = s.on_status(status("p1", "s1", "failed", "blocked by person p"))
+    assert kinds(failed) == ["start_search"] and "blocked by person p" in failed[0].reason
+    assert s.current is not None and s.current.plan_id == ""
 
 
 def test_a_boosted_goal_revises_the_search() -> None:
@@ -168,31 +173,21 @@ def test_unknown_policy_is_refused() -> None:
         IntentionScheduler("sometimes")
 
 
-def test_a_replacement_in_several_parts_waits_whole_and_runs_whole() -> None:
-    """Every part of a repair that comes while the old plan stops is kept, in order, and
-    only one arrest is asked (parts used to overwrite each other: a tail ran alone)."""
+def test_a_replacement_in_several_parts_runs_whole() -> None:
+    """Each part of a repair is passed on in order; the later parts continue it."""
     s = running()
     first = s.on_plan(plan("r1", "t1", "t2", baseline="s1", after="s1"))
-    assert kinds(first) == ["arrest"]
-    assert s.on_plan(plan("r1", "t3", baseline="r1")) == []  # no second arrest
-    out = s.on_arrested(arrested("p1", "s1"))
-    assert kinds(out) == ["execute", "execute"]
-    assert [s.step_id for c in out if c.plan for s in c.plan.steps] == ["t1", "t2", "t3"]
-    assert s.current is not None and s.current.plan_id == "r1"
+    assert kinds(first) == ["execute"]
+    more = s.on_plan(plan("r1", "t3", baseline="r1"))
+    assert kinds(more) == ["execute"]
+    assert s.current is not None and s.current.steps == ["t1", "t2", "t3"]
 
 
-def test_a_step_refused_while_its_replacement_waits_lets_the_replacement_take_over() -> None:
-    """The step the repair was made for fails: no new search from scratch; the repair runs
-    once the executor reports the old plan stopped (no idle robot after a repair)."""
+def test_a_plan_that_comes_during_a_clean_preemption_is_not_executed() -> None:
     s = running()
-    assert kinds(s.on_plan(plan("r1", "t1", baseline="s1", after="s1"))) == ["arrest"]
-    out = s.on_status(status("p1", "s2", "refused", "over all condition"))
-    assert kinds(out) == ["execute"] and out[0].plan is not None and out[0].plan.plan_id == "r1"
-    assert s.on_arrested(arrested("p1", "s1")) == []  # the late report changes nothing
+    assert kinds(s.choose(URGENT)) == ["cancel_search", "arrest"]  # waits for the report
+    assert s.on_plan(plan("r1", "t1", baseline="s1", after="s1")) == []
+    started = s.on_arrested(arrested("p1", "s1"))
+    assert kinds(started) == ["start_search"] and started[0].desire == URGENT
 
 
-def test_a_report_of_another_plan_does_not_start_the_waiting_one() -> None:
-    s = running()
-    s.on_plan(plan("r1", "t1", baseline="s1", after="s1"))
-    assert s.on_arrested(arrested("old", "")) == []  # not the plan being stopped
-    assert kinds(s.on_arrested(arrested("p1", "s1"))) == ["execute"]

@@ -4,7 +4,7 @@ Steps start at their scheduled time, one action at a time (the world runs one ac
 robot), each only if its at-start conditions hold in the current beliefs; a step whose
 conditions fail is refused, a step the world rejects or fails ends the plan (the rest is
 cancelled) so that a repaired plan can take over. A plan with a new baseline replaces the
-queue. An early arrest after step A lets what already started finish, starts nothing
+queue after the step it applies after. An early arrest after step A lets what already started finish, starts nothing
 after A, and reports the state once nothing runs.
 """
 
@@ -56,17 +56,21 @@ class Dispatcher:
 
     # -- plans ---------------------------------------------------------------------------
     def load(self, plan: PartialPlan, now: float) -> Effects:
-        """Queue a plan: more of the current one, or a replacement (new baseline)."""
+        """Queue a plan: more of the current one, or a replacement (new baseline).
+
+        A replacement applies after step `applies_after` of the queue (the last step
+        its plan keeps): the steps up to it stay and run, the rest is cancelled, and the
+        replacement follows with no gap and no early arrest. A replacement that comes
+        too late (a step after that one already started, or that step did not succeed)
+        is refused: its first step says why, so that the scheduler plans again.
+        """
         out = Effects()
         continues = plan.plan_id == self.plan_id or (
             plan.baseline and plan.baseline == self.plan_id
         )
+        late = ""
         if not continues:
-            for s in self.steps:
-                if s.status == "waiting":
-                    self._set(s, "cancelled", f"replaced by plan {plan.plan_id}", now, out)
-            self.steps = [s for s in self.steps if s.status == "running"]
-            self.arrest = None
+            late = self._splice(plan, now, out)
         known = {s.step.step_id for s in self.steps}
         for step in sorted(plan.steps, key=lambda st: st.start):
             if step.step_id not in known:
@@ -74,7 +78,37 @@ class Dispatcher:
                 self.steps.append(state)
                 self._report(state, now, out)
         self.plan_id = plan.plan_id
+        if late:
+            first = next(s for s in self.steps if s.plan_id == plan.plan_id)
+            self._set(first, "refused", late, now, out)
+            self._abandon(now, out)
         return out
+
+    def _splice(self, plan: PartialPlan, now: float, out: Effects) -> str:
+        """Make room for a replacement; return why it comes too late ("" if it does not)."""
+        ids = [s.step.step_id for s in self.steps]
+        after = plan.applies_after
+        keep = ids.index(after) + 1 if after in ids else 0
+        why = ""
+        if keep:
+            kept = self.steps[keep - 1]
+            started = next((s for s in self.steps[keep:] if s.ends_at != float("inf")), None)
+            if kept.status in ("failed", "refused", "cancelled"):
+                why = f"too late: it applies after {after}, which {kept.status}"
+            elif started is not None:
+                why = f"too late: it applies after {after}, but {started.step.step_id} started"
+        for s in self.steps[keep:]:
+            if s.status == "waiting":
+                self._set(s, "cancelled", f"replaced by plan {plan.plan_id}", now, out)
+        # What stays: the steps still to run up to the one the replacement follows, that
+        # step itself (a later replacement may follow it too) and whatever runs.
+        self.steps = [
+            s
+            for k, s in enumerate(self.steps)
+            if s.status == "running" or (k < keep and s.status == "waiting") or k == keep - 1
+        ]
+        self.arrest = None
+        return why
 
     def running(self) -> StepState | None:
         return next((s for s in self.steps if s.status == "running"), None)
@@ -105,11 +139,16 @@ class Dispatcher:
         return out
 
     def _arrested(self, state: StepState) -> bool:
-        if self.arrest is None or self.arrest[0] != state.plan_id:
+        """Whether an early arrest forbids `state` to start: it comes after the arrest's
+        last step in the queue (a replacement's steps follow the ones it kept), or the
+        arrest allows no step at all."""
+        if self.arrest is None:
             return False
-        ids = [s.step.step_id for s in self.steps if s.plan_id == state.plan_id]
+        ids = [s.step.step_id for s in self.steps]
         last = self.arrest[1]
-        return last in ids and ids.index(state.step.step_id) > ids.index(last)
+        if last not in ids:
+            return True
+        return ids.index(state.step.step_id) > ids.index(last)
 
     def _start(self, state: StepState, now: float, beliefs: BeliefSet, out: Effects) -> None:
         # An over-all condition that already fails would fail the action as it starts.
@@ -185,8 +224,9 @@ class Dispatcher:
             return  # steps up to `last` still have to run
         for s in self.steps:
             if s.status == "waiting" and self._arrested(s):
-                self._set(s, "cancelled", f"early arrest after {last}", now, out)
-        ours = [s for s in self.steps if s.plan_id == plan_id]
+                why = f"early arrest after {last}" if last else "early arrest"
+                self._set(s, "cancelled", why, now, out)
+        ours = self.steps  # a replacement's queue holds the steps it kept
         # Started: accepted by the world (a refused or rejected step never ran).
         started = [s for s in ours if s.ends_at != float("inf")]
         cancelled = [s.step.step_id for s in ours if s.status == "cancelled"]

@@ -6,9 +6,10 @@ early arrest, time passing); its outputs are `Command`s for the service to send 
 cancel a search, pass a plan to the executor, ask for an early arrest, drop a desire).
 
 - A plan continuing the one executing (its baseline is the current plan) is passed on.
-- A plan with another baseline (a repair or an improvement) replaces the queue: the
-  executor is asked to stop after the last step the new plan keeps (its prefix), and the
-  new plan is passed on once the executor reports it stopped.
+- A plan with another baseline (a repair or an improvement) replaces the queue: it is
+  passed on at once, and the executor runs the executing plan up to the last step the
+  new plan keeps (its `applies_after`), then the new plan, with no gap. A step of the
+  old plan that fails meanwhile ends both: a new search starts.
 - A higher-priority desire under `no_preempt` waits until the intention ends; under
   `preempt` the executor stops after the running step and the new desire starts at once;
   under `clean_preempt` the new desire starts only once the executor reported it stopped.
@@ -50,6 +51,7 @@ class Intention:
     plan_id: str = ""
     steps: list[str] = field(default_factory=list)
     last_started: str = ""
+    previous: str = ""  # the plan a replacement follows: its kept steps still run
     plan_failures: int = 0
     exec_failures: int = 0
     waiting: bool = False  # its goal is blocked by something that moves
@@ -73,8 +75,6 @@ class IntentionScheduler:
         self.plan_retries, self.exec_retries = plan_retries, exec_retries
         self.wait_stall = wait_stall
         self.current: Intention | None = None
-        # A replacement plan's parts, waiting for the executor to stop the current plan.
-        self.pending: list[PartialPlan] = []
         self.next_desire: Desire | None = None  # waits for a clean preemption
         self.stopping = False
         self.retry_reason = ""  # a failed search waits for the beliefs to change
@@ -116,7 +116,6 @@ class IntentionScheduler:
     def _start(self, desire: Desire) -> list[Command]:
         self.retry_reason = ""
         self.current = Intention(desire)
-        self.pending = []
         return [Command("start_search", desire)]
 
     def _arrest_now(self) -> list[Command]:
@@ -135,7 +134,7 @@ class IntentionScheduler:
         if self.halted:
             return []
         self.halted = True
-        self.pending, self.next_desire, self.retry_reason = [], None, ""
+        self.next_desire, self.retry_reason = None, ""
         cur = self.current
         if cur is None:
             return []
@@ -161,20 +160,10 @@ class IntentionScheduler:
             return []
         if not cur.plan_id or plan.baseline == cur.plan_id or plan.plan_id == cur.plan_id:
             return self._pass_on(plan)
-        if self.pending and plan.plan_id == self.pending[0].plan_id:
-            self.pending.append(plan)  # more of the replacement: it waits with the rest
-            return []
-        self.pending = [plan]
-        self.stopping = True
-        after = plan.applies_after or cur.last_started
-        return [
-            Command(
-                "arrest",
-                plan_id=cur.plan_id,
-                after_step=after,
-                reason=f"replaced by {plan.plan_id}",
-            )
-        ]
+        if self.next_desire is not None:
+            return []  # a clean preemption is under way: the intention is over
+        cur.previous, cur.steps = cur.plan_id, []
+        return self._pass_on(plan)
 
     def _pass_on(self, plan: PartialPlan) -> list[Command]:
         cur = self.current
@@ -245,27 +234,20 @@ class IntentionScheduler:
     def on_status(self, status: ActionStatus) -> list[Command]:
         """Follow the executor: a failed or refused step means replan (or drop)."""
         cur = self.current
-        if cur is None or status.plan_id != cur.plan_id:
+        if cur is None or status.plan_id not in (cur.plan_id, cur.previous) or not status.plan_id:
             return []
         if status.status == "running":
             cur.last_started = status.step_id
         if status.status not in ("failed", "refused") or self.halted:
             return []
-        if self.pending:
-            # A replacement was waiting for this plan to stop, and now it has (the
-            # executor drops the rest of a plan whose step failed): the replacement takes
-            # over at once, with no new search and no wait for an arrest report.
-            waiting, self.pending, self.stopping = self.pending, [], False
-            cur.plan_id, cur.steps, cur.last_started = "", [], ""
-            return [c for plan in waiting for c in self._pass_on(plan)]
         cur.exec_failures += 1
         if cur.exec_failures > self.exec_retries:
             return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
-        cur.plan_id, cur.steps, cur.last_started = "", [], ""
+        cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
         return [Command("start_search", cur.desire, reason=f"replan after: {status.reason}")]
 
     def on_arrested(self, report: ArrestReport) -> list[Command]:
-        """The executor stopped: pass the waiting plan on, or start the preempting desire."""
+        """The executor stopped: start the preempting desire, if one waits for it."""
         self.stopping = False
         if self.halted:
             if self.current is not None and report.plan_id == self.current.plan_id:
@@ -275,12 +257,7 @@ class IntentionScheduler:
             desire, self.next_desire = self.next_desire, None
             self.current = None
             return self._start(desire)
-        cur = self.current
-        if not self.pending or cur is None or report.plan_id != cur.plan_id:
-            return []  # nothing waits, or the report is of another (older) plan
-        waiting, self.pending = self.pending, []
-        cur.plan_id, cur.steps, cur.last_started = "", [], ""
-        return [c for plan in waiting for c in self._pass_on(plan)]
+        return []
 
     # -- ends ----------------------------------------------------------------------------
     def achieved(self) -> list[Command]:

@@ -181,8 +181,15 @@ class ContinualPlanner:
             raise Unsolvable("no action reaches the goal from these beliefs (relaxed)")
         return task
 
-    def next_grid(self, after: float) -> float:
-        return math.floor(after / self.grid + 1e-9) * self.grid + self.grid
+    def at_grid(self, t: float) -> float:
+        """The first epoch boundary at or after `t`: when a step planned now can start
+        (in lockstep the executor acts after the planner in the same epoch)."""
+        return math.ceil(t / self.grid - 1e-9) * self.grid
+
+    def on_grid(self, t: float) -> float:
+        """`t` on the epoch grid, as a step's start is published (the search separates
+        steps by a small epsilon that the grid rounds away)."""
+        return round(t / self.grid) * self.grid
 
     # -- inputs ---------------------------------------------------------------------------
     def on_request(self, req: SearchRequest) -> list[Message]:
@@ -237,7 +244,7 @@ class ContinualPlanner:
         self.request = replace(req, kind="start")
         self.line, self.last_forecast, self.repair_trigger = None, ("", "", ""), ""
         task = self.request_task(req.goal)
-        line = Line(self._plan_id(), "new", self.next_grid(self.now))
+        line = Line(self._plan_id(), "new", self.at_grid(self.now))
         self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
         return [self._status(req.request_id, "searching")]
 
@@ -329,8 +336,8 @@ class ContinualPlanner:
             self.log("commit_failed", plan=line.plan_id, reason=done.reason)
             return []
         after = line.step_ids[done.count - 1] if done.count else ""
-        ends = [a.time + (a.duration or 0.0) for a in line.steps[: done.count]]
-        origin = self.next_grid(max([self.now, *ends]) - 1e-9)
+        ends = [self.on_grid(a.time) + (a.duration or 0.0) for a in line.steps[: done.count]]
+        origin = self.at_grid(max([self.now, *ends]))
         new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
         thread: SearchThread | Improver
         if purpose == "improve":
@@ -457,7 +464,7 @@ class ContinualPlanner:
         steps = plan_steps(self.domain, plan, line.origin, line.plan_id)
         out_steps = []
         for k, (scheduled, step) in enumerate(zip(plan.actions, steps, strict=True)):
-            start = round((line.origin + scheduled.time) / self.grid) * self.grid
+            start = self.on_grid(line.origin + scheduled.time)
             step_id = f"{line.plan_id}-{first + k + 1}"
             out_steps.append(replace(step, step_id=step_id, start=start))
             line.steps.append(
