@@ -189,5 +189,3 @@ def test_a_plan_that_comes_during_a_clean_preemption_is_not_executed() -> None:
     assert s.on_plan(plan("r1", "t1", baseline="s1", after="s1")) == []
     started = s.on_arrested(arrested("p1", "s1"))
     assert kinds(started) == ["start_search"] and started[0].desire == URGENT
-
-

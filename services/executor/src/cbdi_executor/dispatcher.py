@@ -4,8 +4,8 @@ Steps start at their scheduled time, one action at a time (the world runs one ac
 robot), each only if its at-start conditions hold in the current beliefs; a step whose
 conditions fail is refused, a step the world rejects or fails ends the plan (the rest is
 cancelled) so that a repaired plan can take over. A plan with a new baseline replaces the
-queue after the step it applies after. An early arrest after step A lets what already started finish, starts nothing
-after A, and reports the state once nothing runs.
+queue after the step it applies after. An early arrest after step A lets what already
+started finish, starts nothing after A, and reports the state once nothing runs.
 """
 
 from __future__ import annotations
