@@ -144,6 +144,7 @@ class Run:
     up_args: str = ""
     moves: int | None = None
     sim_time: float | None = None
+    busy: float | None = None  # simulated seconds the robot spent in actions
     recycled: int | None = None
     plans: int | None = None
     replans: int | None = None
@@ -162,6 +163,13 @@ class Run:
         """Tell whether the run recycled everything (a `done` run has statistics)."""
         return self.result == "done" and self.moves is not None and self.sim_time is not None
 
+    @property
+    def idle(self) -> float | None:
+        """Return the percentage of the mission the robot spent in no action."""
+        if self.busy is None or not self.sim_time:
+            return None
+        return 100.0 * max(0.0, 1.0 - self.busy / self.sim_time)
+
 
 _TASK_COLUMNS: tuple[str, ...] = ("situation", "move_step", "det_area", "known_litter")
 _TASK_COLUMNS += ("mode", "seed", "clock", "planning_factor")
@@ -170,7 +178,7 @@ COLUMNS: tuple[str, ...] = _TASK_COLUMNS + _RUN_FIELDS
 _INTS = {"exit", "moves", "recycled", "plans", "replans", "forecast_repairs", "improvements"}
 _INTS |= {"stalls"}
 _INTS |= {f"replans_{p}" for p in REPLAN_PURPOSES}
-_FLOATS = {"planning_speed", "speed", "sim_time", "wall"}
+_FLOATS = {"planning_speed", "speed", "sim_time", "busy", "wall"}
 
 
 def run_from_summary(given: Run, summary: dict[str, Any]) -> Run:
@@ -185,6 +193,7 @@ def run_from_summary(given: Run, summary: dict[str, Any]) -> Run:
         reason=str(summary.get("reason", "")),
         moves=robot.get("moves"),
         sim_time=summary.get("sim_time"),
+        busy=robot.get("busy"),
         recycled=robot.get("recycled"),
         plans=planner.get("plans"),
         replans=planner.get("replans"),

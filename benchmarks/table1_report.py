@@ -10,7 +10,15 @@ from collections.abc import Sequence
 
 from table1_bounds import BOUND_EXPANSIONS, Bound
 from table1_model import PAPER, SITUATIONS, Run
-from table1_stats import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, LEVEL, MIN_PAIRS, Interval, Sample
+from table1_stats import (
+    BOOTSTRAP_RESAMPLES,
+    BOOTSTRAP_SEED,
+    LEVEL,
+    MIN_PAIRS,
+    Interval,
+    Sample,
+    describe,
+)
 from table1_summary import (
     ONLINE_BETTER,
     ONLINE_FASTER,
@@ -135,8 +143,9 @@ def time_table(rows: Sequence[Row], static: Bound | None) -> list[str]:
     return _table(head, body)
 
 
-def summary_lines(rows: Sequence[Row]) -> list[str]:
-    """Say per planning speed in how many situations online wins on moves and on time."""
+def summary_lines(rows: Sequence[Row], runs: Sequence[Run] = ()) -> list[str]:
+    """Say per planning speed in how many situations online wins on moves and on time,
+    and how idle each mode's robot was (from `runs`, when given)."""
     out = []
     for factor in sorted({r.factor for r in rows}):
         mine = [r for r in rows if r.factor == factor]
@@ -149,7 +158,32 @@ def summary_lines(rows: Sequence[Row]) -> list[str]:
             f"- planning speed x{factor:g}: online is better on moves in {moves} of {n} "
             f"situations ({moves_other}); on mission time in {time} of {n} ({time_other})."
         )
+        out += _idle_line(
+            factor, [r for r in runs if r.task.clock == "lockstep" and r.task.factor == factor]
+        )
     return out
+
+
+def _idle_line(factor: float, runs: Sequence[Run]) -> list[str]:
+    """The idle fraction (no action running) of each mode over the runs that recycled all."""
+    idle = {
+        m: [r.idle for r in runs if r.ok and r.task.mode == m and r.idle is not None]
+        for m in ("offline", "online")
+    }
+    if not idle["offline"] or not idle["online"]:
+        return []
+    off, on = describe(idle["offline"]), describe(idle["online"])
+    pairs = {
+        m: {(r.task.situation, r.task.seed): r.idle for r in runs if r.ok and r.task.mode == m}
+        for m in ("offline", "online")
+    }
+    both = sorted(set(pairs["offline"]) & set(pairs["online"]), key=str)
+    diff = describe([(pairs["online"][k] or 0.0) - (pairs["offline"][k] or 0.0) for k in both])
+    return [
+        f"- planning speed x{factor:g}, idle (% of the mission with no action running): "
+        f"offline {_mean_sd_ci(off)}, online {_mean_sd_ci(on)}; online - offline "
+        f"{_diff(diff)} points."
+    ]
 
 
 def _other(rows: Sequence[Row], field: str) -> str:
@@ -302,7 +336,7 @@ def render_markdown(runs: Sequence[Run], bounds: Sequence[Bound]) -> str:
         title = _speed_title(factor, runs)
         lines += [f"## Moves, {title}", "", *moves_table(mine, static), ""]
         lines += [f"## Mission time (simulated s), {title}", "", *time_table(mine, static), ""]
-    lines += ["## Summary", "", *summary_lines(rows), ""]
+    lines += ["## Summary", "", *summary_lines(rows, runs), ""]
     lines += ["## Failed runs", "", *failure_lines(rows), ""]
     lines += ["## Lockstep stalls (an ack timeout: the run may hang on timing)", ""]
     lines += [*stall_lines(runs), ""]

@@ -48,7 +48,7 @@ SUMMARY = {
     "sim_time": 107.0,
     "trace_digest": "9f2c",
     "stalls": {"robot1/planner": 2, "robot1/executor": 1},
-    "stats": {"agents": {"robot1": {"moves": 48, "pickups": 3, "recycled": 3}}},
+    "stats": {"agents": {"robot1": {"moves": 48, "pickups": 3, "recycled": 3, "busy": 85.6}}},
     "planner": {
         "agents": {
             "robot1": {
@@ -74,6 +74,7 @@ def fake_run(task: Any) -> Any:
         "done",
         moves=moves,
         sim_time=80.0 + (12.5 if online else 0.0) + task.seed,
+        busy=72.0 if online else 76.0,
         recycled=3,
         plans=4,
         replans=3,
@@ -171,6 +172,9 @@ def test_the_markdown_shows_failures_verdicts_paper_and_bounds() -> None:
     assert "wall" not in text and "12.345" not in text
     assert "20 lockstep runs (speed 0 (flat out)): seeds 1..5" in text
     assert "- 4,1,2 offline seed 2: 2 stalled epochs" in text
+    # Idle: 1 - busy / time, per mode over the runs that recycled all, and paired.
+    idle = next(line for line in text.splitlines() if "idle (% of the mission" in line)
+    assert "offline 8.4 ±" in idle and "online 24.6 ±" in idle and "+16.2" in idle
 
 
 def test_the_real_time_table_stands_beside_the_lockstep_runs() -> None:
@@ -254,6 +258,7 @@ def test_a_summary_gives_the_robots_and_its_planners_counts() -> None:
     assert (run.result, run.moves, run.sim_time, run.recycled) == ("done", 48, 107.0, 3)
     assert (run.replans_new, run.replans_repair, run.forecast_repairs) == (4, 2, 2)
     assert (run.trace_digest, run.stalls) == ("9f2c", 3)
+    assert run.busy == 85.6 and run.idle is not None and abs(run.idle - 20.0) < 1e-9
     assert run.ok
     assert run.speed == 0.0  # what was passed is kept
     empty = model.run_from_summary(model.Run(task, "no_summary", exit=1), {"result": "failed"})

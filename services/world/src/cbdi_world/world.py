@@ -68,6 +68,7 @@ class AgentState:
     holding: list[str] = field(default_factory=list)
     action: Action | None = None
     stats: dict[str, int] = field(default_factory=dict)
+    busy: float = 0.0  # seconds spent in actions that ended (succeeded or failed)
 
     def count(self, what: str) -> None:
         self.stats[what] = self.stats.get(what, 0) + 1
@@ -251,6 +252,7 @@ class World:
             action = agent.action
             assert action is not None
             agent.action = None
+            agent.busy += max(0.0, action.ends_at - action.starts_at)
             status, reason = self._end(agent, action)
             outcomes.append(
                 ActionOutcome(
@@ -369,7 +371,10 @@ class World:
     def stats(self, agent: str = "") -> WorldStats:
         """Per-agent counters (one agent, or all when `agent` is empty) and litter totals."""
         names = [self.agent(agent).spec.name] if agent else list(self.agents)
-        rows = [AgentStats(agent=n, **self.agents[n].stats) for n in names]
+        rows = [
+            AgentStats(agent=n, busy=round(self.agents[n].busy, 9), **self.agents[n].stats)
+            for n in names
+        ]
         return WorldStats(
             epoch=self.epoch,
             time=self.time,

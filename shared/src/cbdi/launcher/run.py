@@ -419,8 +419,6 @@ async def _collect_stats(bus: Bus, summary: RunSummary) -> None:
         summary.sim_time = summary.sim_time or stats.time
 
 
-def _agent_dict(a: Any) -> dict[str, int]:
-    return {
-        k: getattr(a, k)
-        for k in ("moves", "pickups", "recycled", "blocked", "failed", "rejected", "contacts")
-    }
+def _agent_dict(a: Any) -> dict[str, int | float]:
+    counts = ("moves", "pickups", "recycled", "blocked", "failed", "rejected", "contacts")
+    return {**{k: getattr(a, k) for k in counts}, "busy": a.busy}

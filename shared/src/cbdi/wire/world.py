@@ -221,6 +221,7 @@ class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
     failed: Count = 0
     rejected: Count = 0
     contacts: Count = 0
+    busy: NonNegative = 0.0  # simulated seconds in actions that ended (the rest is idle)
 
 
 class StatsRequest(Message, frozen=True, tag="cbdi.world.StatsRequest/1"):
