@@ -7,7 +7,6 @@ import pytest
 from cbdi.beliefs import BeliefSet, fact, fluent
 from cbdi.wire.agent import Check, PartialPlan, PlanStep
 from cbdi.wire.world import ActionOutcome, ActionReply
-from cbdi_executor.binding import UnboundActionError, cell_of, to_request
 from cbdi_executor.checks import describe, first_failing
 from cbdi_executor.dispatcher import Dispatcher, Effects
 
@@ -72,11 +71,11 @@ def test_steps_start_at_their_time_one_at_a_time() -> None:
         ("s1", "waiting"),
     ]
     first = start(d, 0.0, FREE)
-    assert first.requests[0].target == (1, 0) and statuses(first) == [("s0", "running")]
+    assert first.requests[0].args[2] == "c_1_0" and statuses(first) == [("s0", "running")]
     assert start(d, 1.0, FREE).requests == []  # s0 still running: s1 waits
     assert statuses(finish(d, first, 1.0)) == [("s0", "succeeded")]
     second = start(d, 1.0, FREE)
-    assert second.requests[0].target == (2, 0)
+    assert second.requests[0].args[2] == "c_2_0"
 
 
 def test_not_before_its_time() -> None:
@@ -188,36 +187,24 @@ def test_a_step_the_world_rejects_during_an_early_arrest_ends_it_with_a_true_rep
     assert report.cancelled == ["s2"]
 
 
-def test_checks_and_bindings() -> None:
+def test_checks() -> None:
     beliefs = FREE
     assert first_failing([Check(atom=["loaded_amount", "r"], op="LT", value=3)], beliefs) is None
     bad = Check(atom=["loaded_amount", "r"], op="GE", value=3)
     assert first_failing([bad], beliefs) == bad and describe(bad) == "(>= (loaded_amount r) 3)"
     assert describe(Check(atom=["free", "c"], op="F")) == "(not (free c))"
-    assert cell_of("c_12_3") == (12, 3)
+
+
+def test_a_step_is_requested_as_its_grounded_pddl_action() -> None:
+    """The executor knows no domain: the world (or a performer) binds the action."""
+    d = Dispatcher("r")
     pick = PlanStep(
         step_id="x", action="litter_pickup", args=["r", "pla61", "c_6_1"], start=0, duration=3
     )
-    assert to_request("r", pick, "1").item == "pla61"
-    recycle = PlanStep(
-        step_id="y",
-        action="recycle_plastic",
-        args=["r", "pla61", "bin", "c_0_1", "c_0_0"],
-        start=0,
-        duration=3,
-    )
-    assert to_request("r", recycle, "2").action == "recycle"
-    with pytest.raises(UnboundActionError, match="no action for 'fly'"):
-        to_request("r", PlanStep(step_id="z", action="fly", args=[], start=0, duration=1), "3")
-    with pytest.raises(UnboundActionError, match="not a cell"):
-        cell_of("kitchen")
-
-
-def test_an_unbound_action_is_refused_not_crashed() -> None:
-    d = Dispatcher("r")
-    d.load(plan("p", PlanStep(step_id="z", action="fly", args=["r"], start=0, duration=1)), 0)
-    out = start(d, 0.0, FREE)
-    assert statuses(out) == [("z", "refused")] and "no action" in out.statuses[0].reason
+    d.load(plan("p", pick), 0)
+    req = d.tick(0.0, FREE).requests[0]
+    assert (req.action, req.args, req.duration) == ("litter_pickup", ["r", "pla61", "c_6_1"], 3)
+    assert req.target is None and req.item is None
 
 
 def test_a_replacement_follows_the_step_it_applies_after_with_no_gap() -> None:
@@ -234,10 +221,10 @@ def test_a_replacement_follows_the_step_it_applies_after_with_no_gap() -> None:
     assert [s.step.step_id for s in d.steps] == ["s0", "s1", "s3"]
     finish(d, first, 1.0)
     second = start(d, 1.0)
-    assert second.requests[0].target == (2, 0)  # s1, kept
+    assert second.requests[0].args[2] == "c_2_0"  # s1, kept
     finish(d, second, 2.0)
     third = start(d, 2.0, FREE.adding([fact("free", "c_4_0")]))
-    assert third.requests and third.requests[0].target == (4, 0)  # q's step, at once
+    assert third.requests and third.requests[0].args[2] == "c_4_0"  # q's step, at once
     assert statuses(third) == [("s3", "running")]
 
 

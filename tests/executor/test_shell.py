@@ -88,7 +88,7 @@ async def test_a_rejection_during_an_early_arrest_sends_a_true_arrest_report() -
         await bus.publish(beliefs, encode(to_wire(moved, "robot1", 1.0, 1)))
         async with asyncio.timeout(5):
             _, report = await anext(reports)
-        assert len(seen) == 2 and seen[1].target == (2, 0)  # s1 went out and was rejected
+        assert len(seen) == 2 and seen[1].args[2] == "c_2_0"  # s1 went out and was rejected
         assert report.plan_id == "p" and report.last_step == "s0"
         assert report.cancelled == ["s2"]
     finally:

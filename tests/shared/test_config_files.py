@@ -170,3 +170,38 @@ def test_cbdi_up_exits_2_for_a_bad_scenario(tmp_path: Path) -> None:
         [str(CBDI), "up", "paper-7x7", "--until", "-1"], capture_output=True, text=True
     )
     assert done.returncode == 2 and "--until" in done.stderr
+
+
+def test_a_domain_action_nobody_performs_stops_cbdi_up_before_it_starts(tmp_path: Path) -> None:
+    """The recycling domain with `move` renamed `drive`: the world performs no `drive`,
+    so `cbdi up` says so (file, line, action, what the world does) and starts nothing;
+    an agent file that names a performer for it passes the check."""
+    domain = tmp_path / "domain.pddl"
+    renamed = DOMAIN.read_text().replace("(:durative-action move", "(:durative-action drive")
+    assert renamed != DOMAIN.read_text()
+    domain.write_text(renamed)
+    line = renamed[: renamed.index("(:durative-action drive")].count("\n") + 1
+    for performers in ("", 'performers = ["drive"]\n'):
+        text = AGENT.read_text().replace('domain = "../pddl/domain.pddl"', f'domain = "{domain}"')
+        (tmp_path / "agent.toml").write_text(performers + text)
+        path = tmp_path / "s.toml"
+        path.write_text(
+            f'name = "s"\nmap = "{MAP}"\n[[agents]]\nname = "robot1"\nkind = "bdi"\n'
+            f'agent_file = "{tmp_path / "agent.toml"}"\n'
+        )
+        if performers:
+            assert load_scenario(path).agents[0].name == "robot1"
+            continue
+        with pytest.raises(CbdiError, match=rf"{domain}:{line}: action drive: nobody performs"):
+            load_scenario(path)
+        done = subprocess.run([str(CBDI), "up", str(path)], capture_output=True, text=True)
+        assert done.returncode == 2 and "Traceback" not in done.stderr
+        assert "performs move, litter_pickup, recycle" in done.stderr, done.stderr
+        assert "started service" not in done.stderr
+    bad = tmp_path / "agent.toml"
+    bad.write_text(
+        'performers = ["fly"]\n'
+        + AGENT.read_text().replace('domain = "../pddl/domain.pddl"', f'domain = "{DOMAIN}"')
+    )
+    with pytest.raises(CbdiError, match="performers: the domain has no action 'fly'"):
+        load_agent(bad, "robot1")

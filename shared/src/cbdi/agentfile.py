@@ -73,6 +73,9 @@ class RawAgentFile:
     # The domain's predicates that moving things change (a cell `free` of people and
     # robots): a goal that only such beliefs block is waited out, not given up.
     transient: tuple[str, ...] = ()
+    # The domain's actions that performers carry out (code on the robot or beside it,
+    # `cbdi.performer`) rather than the world: the executor sends them to the performer.
+    performers: tuple[str, ...] = ()
 
 
 def read_agent_file(path: str | Path, agent: str) -> RawAgentFile:
@@ -100,7 +103,39 @@ def parse_agent_text(text: str, source: str, base: Path) -> RawAgentFile:
     if not path.is_file():
         raise AgentFileError(source, "domain", f"no such file {path}")
     planning = _planning(data.get("planning", {}), source)
-    return RawAgentFile(data, source, path, planning, _transient(data, source, path))
+    transient = _transient(data, source, path)
+    return RawAgentFile(data, source, path, planning, transient, _performers(data, source, path))
+
+
+def _performers(data: dict[str, Any], source: str, domain: Path) -> tuple[str, ...]:
+    """Read `performers`: names of actions the domain declares."""
+    names = data.get("performers", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise AgentFileError(source, "performers", "expected a list of action names")
+    declared = domain_actions(_domain_text(domain, source))
+    for name in names:
+        if name.lower() not in declared:
+            known = ", ".join(sorted(declared)) or "none"
+            raise AgentFileError(
+                source, "performers", f"the domain has no action {name!r} (it has: {known})"
+            )
+    return tuple(n.lower() for n in names)
+
+
+def _domain_text(domain: Path, source: str) -> str:
+    try:
+        return domain.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AgentFileError(source, "domain", f"{domain}: cannot read it ({exc})") from None
+
+
+def domain_actions(text: str) -> dict[str, int]:
+    """Return the actions a PDDL domain declares, with the line each is declared on."""
+    found: dict[str, int] = {}
+    bare = _COMMENT.sub("", text)  # comments go, their lines stay
+    for m in _ACTION.finditer(bare):
+        found.setdefault(m.group(1).lower(), bare.count("\n", 0, m.start()) + 1)
+    return found
 
 
 def _transient(data: dict[str, Any], source: str, domain: Path) -> tuple[str, ...]:
@@ -172,6 +207,8 @@ def _planning(table: Any, source: str) -> PlanningSettings:
 
 
 _TOKEN = re.compile(r";[^\n]*|\(|\)|[^\s();]+")
+_COMMENT = re.compile(r";[^\n]*")
+_ACTION = re.compile(r"\(\s*:(?:durative-)?action\s+([^\s();]+)", re.IGNORECASE)
 
 
 def domain_signature(text: str) -> dict[str, int]:

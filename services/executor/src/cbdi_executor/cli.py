@@ -32,6 +32,8 @@ def shell(argv: Sequence[str] | None = None) -> TogetherService:
         description="Dispatch an agent's plans to the world.",
     )
     keys.validate_name(settings.agent)
+    for action in settings.performer:
+        keys.validate_name(action, "performer action")
     service = keys.service_id("executor", settings.agent)
     return TogetherService(service, settings, executor_main(settings))
 

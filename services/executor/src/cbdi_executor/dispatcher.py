@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from cbdi.beliefs import BeliefSet
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep, StepStatus
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest
-from cbdi_executor.binding import UnboundActionError, to_request
 from cbdi_executor.checks import describe, first_failing
 
 __all__ = ["Dispatcher", "Effects", "StepState"]
@@ -161,12 +160,14 @@ class Dispatcher:
             self._abandon(now, out)
             return
         self._requests += 1
-        try:
-            request = to_request(self.agent, state.step, f"{self.agent}-{self._requests}")
-        except UnboundActionError as exc:
-            self._set(state, "refused", str(exc), now, out)
-            self._abandon(now, out)
-            return
+        step = state.step
+        request = ActionRequest(
+            agent=self.agent,
+            action=step.action,
+            request_id=f"{self.agent}-{self._requests}",
+            args=list(step.args),
+            duration=step.duration,
+        )
         state.request_id = request.request_id
         state.status = "running"  # reported with the world's start time, on its reply
         out.requests.append(request)

@@ -20,6 +20,7 @@ from cbdi.bus.typed import Stamped, dropping
 from cbdi.clock import SimClock
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
+from cbdi.performer import outcomes_key, performer_key
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import BeliefsUpdate, EarlyArrest, PartialPlan
@@ -48,13 +49,24 @@ class ExecutorSettings(ServiceSettings):
     ack_timeout: float = field(
         default=120.0, metadata={"help": "lockstep: seconds to wait for the scheduler's epoch"}
     )
+    performer: tuple[str, ...] = field(
+        default=(),
+        metadata={"help": "an ACTION a performer carries out (cbdi.performer), not the world"},
+    )
 
 
 class ExecutorService:
     """One agent's executor on the bus."""
 
-    def __init__(self, ctx: ServiceContext, agent: str, ack_timeout: float = 120.0) -> None:
+    def __init__(
+        self,
+        ctx: ServiceContext,
+        agent: str,
+        ack_timeout: float = 120.0,
+        performers: tuple[str, ...] = (),
+    ) -> None:
         self.ctx, self.agent = ctx, agent
+        self.performers = frozenset(a.lower() for a in performers)
         self.dispatcher = Dispatcher(agent)
         self.clock = SimClock()
         self.beliefs = BeliefSet()
@@ -80,6 +92,7 @@ class ExecutorService:
             keys.scheduler_arrest(a),
             keys.scheduler_beliefs(a),
             keys.epoch_ack(a, "scheduler"),
+            *([outcomes_key(a)] if self.performers else []),
         ]
 
     async def run(self, stream: AsyncIterator[Stamped]) -> None:
@@ -176,8 +189,10 @@ class ExecutorService:
     async def send(self, effects: Effects) -> None:
         bus, now = self.ctx.bus, self.clock.now()
         for req in effects.requests:
+            to = self.performers and req.action.lower() in self.performers
+            key = performer_key(self.agent, req.action) if to else keys.world_rpc("act")
             try:
-                reply = await request(bus, keys.world_rpc("act"), req, ActionReply)
+                reply = await request(bus, key, req, ActionReply)
             except CbdiError as exc:
                 reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
             answered = self.dispatcher.on_reply(reply, now)
@@ -204,7 +219,7 @@ def executor_main(settings: ExecutorSettings) -> ServiceMain:
     """Return the service body of one executor."""
 
     async def body(ctx: ServiceContext) -> None:
-        service = ExecutorService(ctx, settings.agent, settings.ack_timeout)
+        service = ExecutorService(ctx, settings.agent, settings.ack_timeout, settings.performer)
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         ctx.start(service.run(stream), name="executor")
         ready = announce_ready(ctx.bus, settings.agent, "executor", service.lockstep.decided)

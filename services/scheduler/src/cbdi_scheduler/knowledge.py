@@ -15,11 +15,10 @@ the entry-point group `cbdi.knowledge`, named by the agent file's `knowledge` ke
 from __future__ import annotations
 
 from collections.abc import Callable
-from importlib.metadata import entry_points
-from typing import Protocol
+from typing import Protocol, cast
 
 from cbdi.beliefs import Belief, BeliefSet
-from cbdi.errors import ConfigError
+from cbdi.plugins import installed, load_plugin
 from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
 
 __all__ = ["GROUP", "DomainKnowledge", "available", "load_knowledge"]
@@ -53,14 +52,11 @@ class DomainKnowledge(Protocol):
 
 def available() -> list[str]:
     """The names of the installed domains' knowledge."""
-    return sorted(ep.name for ep in entry_points(group=GROUP))
+    return installed(GROUP)
 
 
 def load_knowledge(name: str, agent: str, source: str = "agent file") -> DomainKnowledge:
     """Return a new `name` knowledge for `agent`; ConfigError naming what is installed."""
-    found = [ep for ep in entry_points(group=GROUP) if ep.name == name]
-    if not found:
-        known = ", ".join(available()) or "none"
-        raise ConfigError(source, "knowledge", f"no domain knowledge {name!r} (installed: {known})")
-    factory: Callable[[str], DomainKnowledge] = found[0].load()
-    return factory(agent)
+    factory = load_plugin(GROUP, name, source, "knowledge", "domain knowledge")
+    knowledge: DomainKnowledge = cast(Callable[[str], DomainKnowledge], factory)(agent)
+    return knowledge

@@ -20,11 +20,14 @@ from cbdi import keys
 from cbdi.bus import messages, publish, serve
 from cbdi.bus.typed import dropping
 from cbdi.clock import Clock, WallClock
+from cbdi.errors import CbdiError
+from cbdi.plugins import load_binding
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply, RunFinished
 from cbdi.wire.world import (
+    ActionReply,
     ActionRequest,
     EpochAck,
     StatsRequest,
@@ -96,6 +99,10 @@ class WorldSettings(ServiceSettings):
     failure_probability: float = field(
         default=0.0, metadata={"help": "chance that an accepted action fails at its end"}
     )
+    binding: str = field(
+        default="recycling",
+        metadata={"help": "how PDDL actions map to the world's (entry point cbdi.bindings)"},
+    )
 
 
 def agent_specs(
@@ -131,7 +138,13 @@ class WorldService:
         self.agents = [a for a in world.info().agents]
         self.members = members_of(settings.member, self.agents)
         self.acks = AckTracker(self.members)
-        self.info = replace(world.info(), members=list(self.members), lockstep=settings.lockstep)
+        self.binding = load_binding(settings.binding, "--binding")
+        self.info = replace(
+            world.info(),
+            members=list(self.members),
+            lockstep=settings.lockstep,
+            actions=list(self.binding.actions),
+        )
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
 
@@ -151,12 +164,15 @@ class WorldService:
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
         try:
-            reply = self.world.request(req)
-            self.trace.record(self.world.epoch, req, reply)
+            self.world.agent(req.agent)
+            reply = self.world.request(self.binding.primitive(req) if req.args else req)
         except UnknownAgentError as exc:
             self.ctx.counters["unknown_agent"] += 1
             self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
             return ErrorReply(code="unknown_agent", message=str(exc))
+        except CbdiError as exc:  # a PDDL action this world does not perform
+            reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
+        self.trace.record(self.world.epoch, req, reply)
         self.ctx.log.info(
             "act",
             epoch=self.world.epoch,
@@ -272,6 +288,7 @@ def build_world(settings: WorldSettings) -> World:
     """Load the map and place the agents; raise a CbdiError/WorldError naming what is wrong."""
     if not settings.map:
         raise WorldError("no map given (--map FILE)")
+    load_binding(settings.binding, "--binding")  # a name not installed: said at start
     if not (math.isfinite(settings.linger) and settings.linger >= 0):
         raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
     world_map = with_situation(

@@ -17,6 +17,7 @@ A scenario lives in `domains/recycling/scenarios/<name>.toml`:
     people_jitter = 1    #   a +-1 epoch jitter of their steps,
     duration_noise = 0.0 #   a 0..F stretch of action durations (experiments),
     failure_probability = 0.0  # and actions failing at random (experiments)
+    binding = "recycling" # how the world performs the agents' PDDL actions
     [[agents]]
     name = "robot1"
     kind = "scripted"    # which services make up the agent: scripted, or bdi with
@@ -34,8 +35,10 @@ from pathlib import Path
 from typing import Any
 
 from cbdi import keys
+from cbdi.agentfile import AgentFileError, domain_actions, read_agent_file
 from cbdi.chance import chance_problems
 from cbdi.errors import ConfigError
+from cbdi.plugins import load_binding
 
 __all__ = [
     "AGENT_KINDS",
@@ -43,6 +46,7 @@ __all__ = [
     "RunSettings",
     "Scenario",
     "check_chance",
+    "check_performed",
     "check_ranges",
     "check_until",
     "find_scenario",
@@ -86,6 +90,7 @@ class RunSettings:
     people_jitter: int = 0  # people step up to N epochs early or late (seeded)
     duration_noise: float = 0.0  # actions last a seeded 0..F longer (whole epochs)
     failure_probability: float = 0.0  # accepted actions fail at their end with this chance
+    binding: str = "recycling"  # how the world performs PDDL actions (cbdi.bindings)
 
 
 PLANNING_MODES = ("", "online", "offline")
@@ -212,13 +217,43 @@ def load_scenario(path: Path) -> Scenario:
         raise ConfigError(where, "agents", "a scenario needs at least one agent")
     if len({a.name for a in agents}) != len(agents):
         raise ConfigError(where, "agents", "agent names must be unique")
-    return Scenario(
+    scenario = Scenario(
         name=str(data.get("name", path.stem)),
         path=path,
         map_path=map_path,
         agents=agents,
         run=_run(data.get("run", {}), where),
     )
+    check_performed(scenario)
+    return scenario
+
+
+def check_performed(scenario: Scenario) -> None:
+    """Refuse, before anything starts, a BDI agent whose domain has an action nobody
+    performs: not the world (its binding) and not a performer the agent file names."""
+    binding = load_binding(scenario.run.binding, f"{scenario.path}: run.binding")
+    for agent in scenario.agents:
+        if agent.kind != "bdi" or agent.agent_file is None:
+            continue
+        try:
+            raw = read_agent_file(agent.agent_file, agent.name)
+        except AgentFileError as exc:
+            raise ConfigError(str(scenario.path), f"agents.{agent.name}", str(exc)) from None
+        try:
+            declared = domain_actions(raw.domain.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(str(raw.domain), "file", f"cannot read it ({exc})") from None
+        performed = {a.lower() for a in binding.actions} | set(raw.performers)
+        for action, line in sorted(declared.items(), key=lambda kv: kv[1]):
+            if action not in performed:
+                world = ", ".join(binding.actions)
+                raise ConfigError(
+                    f"{raw.domain}:{line}",
+                    f"action {action}",
+                    f"nobody performs it: the world ({scenario.run.binding!r} binding) "
+                    f"performs {world}, and {raw.source} names no performer for it "
+                    f'(`performers = ["{action}"]` with a `cbdi.performer` running)',
+                )
 
 
 def _get(data: dict[str, Any], field: str, tp: type, where: str) -> Any:

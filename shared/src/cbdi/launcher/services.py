@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cbdi import keys
+from cbdi.agentfile import read_agent_file
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import AGENT_KINDS, AgentEntry, Scenario
 
@@ -75,6 +76,7 @@ def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
     args += ["--people-jitter", str(run.people_jitter)]
     args += ["--duration-noise", str(run.duration_noise)]
     args += ["--failure-probability", str(run.failure_probability)]
+    args += ["--binding", run.binding]
     for agent in scenario.agents:
         own = agent.detection_depth is not None and run.det_area < 0
         depth = f":{agent.detection_depth}" if own else ""
@@ -99,6 +101,10 @@ def _agent_plan(
             args += ["--planning", run.mode]
         if component == "planner" and run.planning_speed > 0:
             args += ["--planning-speed", str(run.planning_speed)]
+        if component == "executor":
+            assert agent.agent_file is not None
+            for action in read_agent_file(agent.agent_file, agent.name).performers:
+                args += ["--performer", action]
         return ServicePlan(service, *_BDI_SCRIPTS[component], tuple(args))
     if agent.kind == "scripted":
         args = ["--agent", agent.name, "--map", path_of(scenario.map_path)]

@@ -64,11 +64,14 @@ class Tick(Message, frozen=True, tag="cbdi.world.Tick/1"):
 
 
 class ActionRequest(Message, frozen=True, tag="cbdi.world.ActionRequest/1"):
-    """Ask the world to start an action for `agent`.
+    """Ask the world (or a performer) to start an action for `agent`.
 
-    `move` needs `target` (a 4-adjacent cell); `pickup` takes the litter in the agent's cell
-    (`item` optional, to pick a specific one); `recycle` puts held litter (`item`, or the
-    first held) into a bin next to the agent.
+    With `args`, `action` is a grounded PDDL action, as an executor sends it: the world
+    binds it to what it simulates (its domain's binding, `cbdi.bindings`), a performer
+    carries it out. Without, it is one of the grid world's own actions: `move` needs
+    `target` (a 4-adjacent cell); `pickup` takes the litter in the agent's cell (`item`
+    optional, to pick a specific one); `recycle` puts held litter (`item`, or the first
+    held) into a bin next to the agent. `duration` is the plan's (0: not given).
     """
 
     agent: AgentName
@@ -76,6 +79,8 @@ class ActionRequest(Message, frozen=True, tag="cbdi.world.ActionRequest/1"):
     request_id: Symbol
     target: Cell | None = None
     item: Symbol | None = None
+    args: Annotated[list[Symbol], msgspec.Meta(max_length=32)] = []
+    duration: NonNegative = 0.0
 
 
 class ActionReply(Message, frozen=True, tag="cbdi.world.ActionReply/1"):
@@ -187,6 +192,7 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     # waits for.
     members: Many[Symbol] = []
     lockstep: bool = False
+    actions: Many[Symbol] = []  # the PDDL actions the world performs (its binding's)
 
 
 ACK_STAGES = ("ready", "beliefs", "done")
