@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import pytest
+from cbdi_recycling.binding import ACTIONS, UnboundActionError, cell_of
 
 from cbdi.errors import ConfigError
 from cbdi.plugins import installed, load_binding
 from cbdi.wire.world import ActionRequest
-from cbdi_recycling.binding import ACTIONS, UnboundActionError, cell_of
 
 
 def call(action: str, *args: str) -> ActionRequest:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import pytest
-
 from cbdi.beliefs import BeliefSet, fact, fluent
 from cbdi.wire.agent import Check, PartialPlan, PlanStep
 from cbdi.wire.world import ActionOutcome, ActionReply
