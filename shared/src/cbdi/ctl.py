@@ -10,9 +10,12 @@
 `stop` is a safe stop: each agent cancels its search, lets the step running now end (a
 durative action is not broken off midway), starts nothing more and keeps its intention
 and desires, whose deadlines wait; the command returns once every executor is still
-(within `--wait` seconds). `resume` plans the intention again from the beliefs of then.
+(within `--wait` seconds). It goes to the scheduler and to the executor, each on its own
+endpoint: an executor stops even if its scheduler is dead or frozen, and tells the
+agent's performers (`cbdi.performer`) to stop what they carry out. `resume` goes on at
+both, and the scheduler plans the intention again from the beliefs of then.
 
-Every change goes through the agent's multi-agent request endpoint (its scheduler's
+Every other change goes through the agent's multi-agent request endpoint (its scheduler's
 `rpc/request`), as another agent's would, under `--group` (default `operator`, which the
 agent file must list in `allowed_groups`). Each `--precondition` or `--context` flag is
 one clause, a list of literals that must all hold; any one clause holding will do.
@@ -29,6 +32,7 @@ import contextlib
 import os
 import sys
 from collections.abc import Sequence
+from typing import Literal
 
 import msgspec
 
@@ -36,7 +40,15 @@ from cbdi import keys
 from cbdi.bus import Bus, BusConfig, open_bus, request
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT
 from cbdi.errors import CbdiError
-from cbdi.wire.agent import AgentReply, AgentRequest, AgentState, RequestOp, StateRequest
+from cbdi.wire.agent import (
+    AgentReply,
+    AgentRequest,
+    AgentState,
+    ExecutorState,
+    ExecutorStop,
+    RequestOp,
+    StateRequest,
+)
 
 __all__ = ["format_state", "main", "split_literals"]
 
@@ -267,41 +279,83 @@ async def _agents(bus: Bus, seconds: float = 1.0) -> list[str]:
 
 
 async def _stop(bus: Bus, args: argparse.Namespace) -> int:
+    """Stop (or resume) each agent at its scheduler and at its executor.
+
+    The scheduler keeps the intention and every desire and lets their deadlines wait;
+    the executor starts nothing more, whatever the scheduler does (a dead or frozen
+    scheduler cannot keep a robot moving), and tells its performers to stop theirs.
+    """
     agents = args.agents or await _agents(bus)
     if not agents:
         print("cbdi ctl: no agent is running", file=sys.stderr)
         return EXIT_NO_ANSWER
-    op: RequestOp = "halt" if args.what == "stop" else "resume"
+    stopping = args.what == "stop"
+    op: RequestOp = "halt" if stopping else "resume"
     req = AgentRequest(from_agent=args.sender, group=args.group, op=op)
     code = EXIT_OK
+    minds: set[str] = set()  # the agents whose scheduler took the request
     for agent in agents:
-        key = keys.component_rpc(agent, "scheduler", "request")
-        reply = await request(bus, key, req, AgentReply, timeout=args.timeout)
-        if not reply.accepted:
-            print(f"{agent}: refused: {reply.reason}", file=sys.stderr)
-            code = EXIT_REFUSED
-    if args.what == "resume" or code:
+        try:
+            reply = await request(
+                bus,
+                keys.component_rpc(agent, "scheduler", "request"),
+                req,
+                AgentReply,
+                timeout=args.timeout,
+            )
+        except CbdiError as exc:
+            print(f"{agent}: the scheduler did not answer ({exc})", file=sys.stderr)
+        else:
+            if reply.accepted:
+                minds.add(agent)
+            elif stopping or "not halted" not in reply.reason:
+                print(f"{agent}: refused: {reply.reason}", file=sys.stderr)
+                code = EXIT_REFUSED
+        try:
+            await _executor(bus, agent, args, "stop" if stopping else "resume")
+        except CbdiError as exc:
+            print(f"{agent}: the executor did not answer ({exc})", file=sys.stderr)
+            code = code or EXIT_NO_ANSWER
+    if not stopping or code:
         if not code:
             print("resumed " + " ".join(agents))
         return code
     try:
         async with asyncio.timeout(args.wait):
             for agent in agents:
-                state = await _still(bus, agent, args.timeout)
-                print(f"{agent} stopped at t={state.time:g}")
+                when = await _still(bus, agent, args, agent in minds)
+                print(f"{agent} stopped at t={when:g}")
     except TimeoutError:
         print(f"cbdi ctl: not all still within {args.wait:g} s", file=sys.stderr)
         return EXIT_NO_ANSWER
     return EXIT_OK
 
 
-async def _still(bus: Bus, agent: str, timeout: float) -> AgentState:
-    """Wait until `agent` is halted and its executor has stopped."""
-    key = keys.component_rpc(agent, "scheduler", "state")
+async def _executor(
+    bus: Bus, agent: str, args: argparse.Namespace, op: Literal["stop", "resume", "state"]
+) -> ExecutorState:
+    key = keys.component_rpc(agent, "executor", "stop")
+    stop = ExecutorStop(from_agent=args.sender, op=op)
+    return await request(bus, key, stop, ExecutorState, timeout=args.timeout)
+
+
+async def _still(bus: Bus, agent: str, args: argparse.Namespace, mind: bool) -> float:
+    """Wait until `agent`'s executor runs nothing (and its scheduler, if it took the
+    stop, stopped arresting); return the simulated time."""
     while True:
-        state = await request(bus, key, StateRequest(beliefs=False), AgentState, timeout=timeout)
-        if state.halted and not (state.intention and state.intention.stopping):
-            return state
+        state = await _executor(bus, agent, args, "state")
+        if not state.running and state.halted:
+            if not mind:
+                return state.time
+            key = keys.component_rpc(agent, "scheduler", "state")
+            try:
+                seen = await request(
+                    bus, key, StateRequest(beliefs=False), AgentState, timeout=args.timeout
+                )
+            except CbdiError:
+                return state.time  # the scheduler went away since: the executor is still
+            if seen.halted and not (seen.intention and seen.intention.stopping):
+                return state.time
         await asyncio.sleep(0.1)
 
 

@@ -30,6 +30,7 @@ from typing import Protocol
 
 from cbdi import keys
 from cbdi.bus import Bus, ErrorSink, LogSink, messages, publish, serve
+from cbdi.wire.agent import ExecutorStop
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, Tick
@@ -42,12 +43,18 @@ __all__ = [
     "outcomes_key",
     "performer_key",
     "serve_performer",
+    "stop_key",
 ]
 
 
 def performer_key(agent: str, action: str) -> str:
     """The request endpoint of the performer of `action` for `agent`."""
     return keys.component_rpc(agent, "performer", action.lower())
+
+
+def stop_key(agent: str) -> str:
+    """The stream on which `agent`'s executor tells its performers of a safe stop."""
+    return keys.agent_stream(agent, "executor", "stop")
 
 
 def outcomes_key(agent: str) -> str:
@@ -143,6 +150,24 @@ class PerformerHost:
         for task in self.running.values():
             task.cancel()
 
+    async def stop(self) -> None:
+        """A safe stop: end what runs now, each as failed "stopped" (what was started
+        may be half done: the scheduler plans again from what it then believes)."""
+        for request_id, task in list(self.running.items()):
+            task.cancel()
+            self.running.pop(request_id, None)
+            await self.publish_outcome(
+                ActionOutcome(
+                    agent=self.agent,
+                    request_id=request_id,
+                    action=self.action,
+                    status="failed",
+                    reason="stopped by a safe stop",
+                    epoch=self.epoch,
+                    time=self.time,
+                )
+            )
+
 
 async def serve_performer(
     bus: Bus, agent: str, action: str, performer: Performer, sink: ErrorSink | None = None
@@ -162,12 +187,18 @@ async def serve_performer(
         async for _key, tick in messages(bus, keys.world_stream("clock"), Tick, errors):
             host.on_tick(tick)
 
+    async def stops() -> None:
+        async for _key, stop in messages(bus, stop_key(agent), ExecutorStop, errors):
+            if stop.op == "stop":
+                await host.stop()
+
     async def answer(_key: str, req: ActionRequest) -> Message:
         return host.on_request(req)
 
-    ticks = asyncio.create_task(clock())
+    followers = [asyncio.create_task(clock()), asyncio.create_task(stops())]
     try:
         await serve(bus, performer_key(agent, action), ActionRequest, answer, errors)
     finally:
-        ticks.cancel()
+        for task in followers:
+            task.cancel()
         host.cancel()

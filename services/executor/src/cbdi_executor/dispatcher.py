@@ -51,6 +51,7 @@ class Dispatcher:
         self.plan_id = ""
         self.steps: list[StepState] = []
         self.arrest: tuple[str, str] | None = None  # (plan id, last step allowed to start)
+        self.halted = False  # an operator's safe stop: nothing starts until resumed
         self._requests = 0
 
     # -- plans ---------------------------------------------------------------------------
@@ -109,6 +110,10 @@ class Dispatcher:
         self.arrest = None
         return why
 
+    def halt(self, stop: bool) -> None:
+        """Stop safely (start nothing more; what runs ends) or go on."""
+        self.halted = stop
+
     def running(self) -> StepState | None:
         return next((s for s in self.steps if s.status == "running"), None)
 
@@ -132,7 +137,7 @@ class Dispatcher:
                     self._report(current, now, out)
             return out
         step = next((s for s in self.steps if s.status == "waiting"), None)
-        if step is None or step.step.start > now + EPS or self._arrested(step):
+        if step is None or self.halted or step.step.start > now + EPS or self._arrested(step):
             return out
         self._start(step, now, beliefs, out)
         return out

@@ -15,15 +15,21 @@ from dataclasses import dataclass, field
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, BeliefsReceiver
-from cbdi.bus import publish, request, sequenced_inputs
+from cbdi.bus import publish, request, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.clock import SimClock
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
-from cbdi.performer import outcomes_key, performer_key
+from cbdi.performer import outcomes_key, performer_key, stop_key
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
-from cbdi.wire.agent import BeliefsUpdate, EarlyArrest, PartialPlan
+from cbdi.wire.agent import (
+    BeliefsUpdate,
+    EarlyArrest,
+    ExecutorState,
+    ExecutorStop,
+    PartialPlan,
+)
 from cbdi.wire.base import Message
 from cbdi.wire.world import ActionOutcome, ActionReply, EpochAck, Percepts, Tick
 from cbdi_executor.dispatcher import Dispatcher, Effects
@@ -156,6 +162,24 @@ class ExecutorService:
             await self.send(self.dispatcher.on_outcome(msg, self.clock.now()))
             await self.step()
 
+    async def on_stop(self, _key: str, req: ExecutorStop) -> Message:
+        """The operator's safe stop: serve it at once, whatever the scheduler does."""
+        d = self.dispatcher
+        if req.op != "state":
+            d.halt(req.op == "stop")
+            self.ctx.log.info("safe_stop", op=req.op, by=req.from_agent)
+            # Performers stop what they carry out for this agent (`cbdi.performer`).
+            await publish(self.ctx.bus, stop_key(self.agent), req, block=True)
+            if req.op == "resume":
+                await self.step()
+        running = d.running()
+        return ExecutorState(
+            agent=self.agent,
+            halted=d.halted,
+            running=running.step.step_id if running else "",
+            time=self.clock.now(),
+        )
+
     def current(self) -> bool:
         """Whether the beliefs are as new as everything the world told us (clock, outcomes).
 
@@ -222,6 +246,14 @@ def executor_main(settings: ExecutorSettings) -> ServiceMain:
         service = ExecutorService(ctx, settings.agent, settings.ack_timeout, settings.performer)
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         ctx.start(service.run(stream), name="executor")
+        stop = serve(
+            ctx.bus,
+            keys.component_rpc(settings.agent, "executor", "stop"),
+            ExecutorStop,
+            service.on_stop,
+            ctx,
+        )
+        ctx.start(stop, name="stop")
         ready = announce_ready(ctx.bus, settings.agent, "executor", service.lockstep.decided)
         ctx.start(ready, name="ready")
 

@@ -42,6 +42,8 @@ __all__ = [
     "DesireEvent",
     "DesireView",
     "EarlyArrest",
+    "ExecutorState",
+    "ExecutorStop",
     "IntentionView",
     "PartialPlan",
     "PlanStep",
@@ -217,6 +219,24 @@ class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
     accepted: bool
     holds: bool = False
     reason: Text = ""
+
+
+class ExecutorStop(Message, frozen=True, tag="cbdi.agent.ExecutorStop/1"):
+    """An operator's safe stop at the executor, which needs no scheduler: `stop` starts
+    nothing more (the running action ends; performers are told to stop theirs),
+    `resume` goes on with what waits, `state` only asks."""
+
+    from_agent: AgentName
+    op: Literal["stop", "resume", "state"]
+
+
+class ExecutorState(Message, frozen=True, tag="cbdi.agent.ExecutorState/1"):
+    """Whether the executor is stopped and what still runs (`running` "" : nothing)."""
+
+    agent: AgentName
+    halted: bool
+    running: Id = ""
+    time: Finite = 0.0
 
 
 class StateRequest(Message, frozen=True, tag="cbdi.agent.StateRequest/1"):
