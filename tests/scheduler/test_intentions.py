@@ -189,3 +189,16 @@ def test_a_plan_that_comes_during_a_clean_preemption_is_not_executed() -> None:
     assert s.on_plan(plan("r1", "t1", baseline="s1", after="s1")) == []
     started = s.on_arrested(arrested("p1", "s1"))
     assert kinds(started) == ["start_search"] and started[0].desire == URGENT
+
+
+def test_a_restarted_executor_has_the_intention_planned_again_and_its_failure_waited_out() -> None:
+    s = running()
+    out = s.executor_restarted()
+    assert kinds(out) == ["start_search"] and out[0].reason == "the executor restarted"
+    assert s.current is not None and s.current.plan_id == ""
+    # The robot's last action may still run: a failed search then is a wait, not a failure.
+    assert kinds(s.on_search_failed("the goal can never hold", now=3.0)) == ["wait"]
+    assert s.current.plan_failures == 0 and s.current.waiting
+    assert kinds(s.retry(4.0)) == ["start_search"]
+    assert s.on_search_failed("no plan", now=5.0) == []  # the next one counts
+    assert s.current.plan_failures == 1

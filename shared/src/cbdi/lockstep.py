@@ -29,12 +29,12 @@ from dataclasses import dataclass, field
 
 from cbdi import keys
 from cbdi.bus.base import Bus
-from cbdi.bus.typed import Stamped, publish
+from cbdi.bus.typed import Stamped, publish, request
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.view import world_info
 from cbdi.wire.base import Message
-from cbdi.wire.world import ACK_STAGES, EpochAck, Percepts, Tick
+from cbdi.wire.world import ACK_STAGES, ClockRequest, EpochAck, Percepts, Tick
 
 __all__ = [
     "WORLD",
@@ -113,6 +113,11 @@ class EpochGate:
         # The first epoch this component takes part in (a restarted one joins late): acks
         # of epochs before it went out before it listened, so they are not waited for.
         self.joined = 0
+        # A late join (`Lockstep.rejoin`): what each sender counted in its acks before we
+        # listened is gone for good, so its first ack we see is taken as received
+        # (otherwise a key it sent on before, and not since, would be waited for).
+        self.rebase = False
+        self.based: set[str] = set()
 
     def _of(self, sender: str) -> _Sender:
         return self.senders.setdefault(sender, _Sender())
@@ -134,7 +139,12 @@ class EpochGate:
             self.changed.notify_all()
 
     def _ack(self, msg: EpochAck) -> None:
-        s = self._of(keys.member(msg.agent, msg.component))
+        sender = keys.member(msg.agent, msg.component)
+        s = self._of(sender)
+        if self.rebase and sender not in self.based and msg.epoch >= 0:
+            self.based.add(sender)
+            for k, n in msg.sent.items():
+                s.received[k] = max(s.received.get(k, 0), n)
         s.acks[(msg.epoch, stage_rank(msg.stage))] = msg
         for old in [k for k in s.acks if k[0] < msg.epoch - 2]:
             del s.acks[old]
@@ -308,6 +318,36 @@ class Lockstep:
         self.start(tick.epoch)
         return []
 
+    async def rejoin(self) -> bool:
+        """Join a run already under way (a member restarted mid-run): the world's latest
+        tick is an epoch whose inputs went by before we subscribed, so it counts as
+        before joining (`joined` is the next epoch), the component acks it at once and
+        takes part from the next one; the world waits for no ack timeout. Return whether
+        it joined so (False: not a lockstep member, or the run has not started)."""
+        if self.on is not None or self.bus is None or not self.me:
+            return False
+        if not await self._member_of_lockstep():
+            return False
+        try:
+            tick = await request(self.bus, keys.world_rpc("clock"), ClockRequest(), Tick)
+        except CbdiError:  # not started (the barrier is ahead of us), or no world
+            return False
+        if self.on is not None or not tick.lockstep or tick.epoch < 1:
+            # The world's next tick came first, or a real-time run; or epoch 0, whose
+            # tick a member that started with the run may still have on its way (the
+            # world waits for every member's ack of it: only a later epoch is sure to
+            # have gone by without us).
+            return False
+        self.on = True
+        for e in self.early:
+            if self.keep_ticks or not isinstance(e.message, Tick):
+                await self.gate.put(e)
+        self.early = []
+        self.gate.joined = tick.epoch + 1
+        self.gate.rebase = True
+        self.start(tick.epoch)
+        return True
+
     def _flush(self) -> list[tuple[str, Message]]:
         early, self.early = self.early, []
         return [(e.key, e.message) for e in early]
@@ -347,11 +387,19 @@ async def send_ack(bus: Bus, agent: str, component: str, epoch: int, stage: str 
 
 
 async def announce_ready(
-    bus: Bus, agent: str, component: str, started: Callable[[], bool], every: float = READY_EVERY
+    bus: Bus,
+    agent: str,
+    component: str,
+    started: Callable[[], bool],
+    every: float = READY_EVERY,
+    lockstep: Lockstep | None = None,
 ) -> None:
     """Say `ready` (the start barrier, epoch -1) until `started()`: the world may come
-    up after us, so one announcement could be lost."""
+    up after us, so one announcement could be lost. With `lockstep`, a run found under
+    way (we restarted) is joined at its current epoch (`Lockstep.rejoin`)."""
     clock = WallClock()
     while not started():
         await send_ack(bus, agent, component, -1, "ready")
+        if lockstep is not None and await lockstep.rejoin():
+            return
         await clock.sleep(every)

@@ -254,7 +254,9 @@ def executor_main(settings: ExecutorSettings) -> ServiceMain:
             ctx,
         )
         ctx.start(stop, name="stop")
-        ready = announce_ready(ctx.bus, settings.agent, "executor", service.lockstep.decided)
+        ready = announce_ready(
+            ctx.bus, settings.agent, "executor", service.lockstep.decided, lockstep=service.lockstep
+        )
         ctx.start(ready, name="ready")
 
     return body

@@ -57,6 +57,10 @@ class Intention:
     waiting: bool = False  # its goal is blocked by something that moves
     quiet_since: float = 0.0  # when the wait last searched again
     stalled: bool = False  # its wait saw nothing change for wait_stall seconds
+    # Its plan was lost with a restarted executor: the next search may run while the
+    # robot's action is still under way (an item neither on the ground nor in hand), so
+    # its failure is waited out like a blocked goal's, not counted.
+    after_restart: bool = False
 
 
 class IntentionScheduler:
@@ -168,7 +172,7 @@ class IntentionScheduler:
     def _pass_on(self, plan: PartialPlan) -> list[Command]:
         cur = self.current
         assert cur is not None
-        cur.waiting = cur.stalled = False
+        cur.waiting = cur.stalled = cur.after_restart = False
         cur.plan_id = plan.plan_id
         cur.steps += [s.step_id for s in plan.steps if s.step_id not in cur.steps]
         return [Command("execute", cur.desire, plan=plan)]
@@ -185,6 +189,7 @@ class IntentionScheduler:
         cur = self.current
         if cur is None or self.halted:
             return []
+        blocked, cur.after_restart = blocked or cur.after_restart, False
         if blocked:
             self.retry_reason = f"retry after: {reason}"
             if cur.waiting:
@@ -245,6 +250,17 @@ class IntentionScheduler:
             return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
         cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
         return [Command("start_search", cur.desire, reason=f"replan after: {status.reason}")]
+
+    def executor_restarted(self) -> list[Command]:
+        """The executor came back without the plan it had: plan the intention again
+        (from the beliefs of now; not counted as a failure), unless stopped."""
+        cur = self.current
+        self.stopping = False
+        if cur is None or self.halted or not cur.plan_id:
+            return []
+        cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
+        cur.after_restart = True
+        return [Command("start_search", cur.desire, reason="the executor restarted")]
 
     def on_arrested(self, report: ArrestReport) -> list[Command]:
         """The executor stopped: start the preempting desire, if one waits for it."""

@@ -121,7 +121,9 @@ class SchedulerService:
         if load_map:
             await self.load_map()  # inputs wait in the stream meanwhile
         # Ready (the start barrier) only now that we know the world's map and members.
-        ready = announce_ready(self.ctx.bus, self.agent, "scheduler", self.lockstep.decided)
+        ready = announce_ready(
+            self.ctx.bus, self.agent, "scheduler", self.lockstep.decided, lockstep=self.lockstep
+        )
         self.ctx.start(ready, name="ready")
         async for item in stream:
             for key, m in await self.lockstep.put(item):
@@ -189,11 +191,17 @@ class SchedulerService:
                 await publish(self.ctx.bus, key, self.last_search, block=True)
 
     async def watch_executor(self) -> None:
-        """Send the next beliefs whole when the executor (re)appears."""
+        """Send the next beliefs whole when the executor (re)appears; one that comes
+        back lost the plan it had, so the intention is planned again."""
         token = keys.alive(keys.service_id("executor", self.agent))
+        seen = False
         async for event in self.ctx.bus.watch_alive(token):
             if event.alive:
                 self.beliefs_out.resend()
+                if seen:
+                    self.ctx.log.warning("executor_restarted")
+                    await self.act(Reaction(commands=self.mind.intentions.executor_restarted()))
+                seen = True
 
     async def watch_group(self) -> None:
         """Tell an agent that appears our standing claims (it missed them)."""

@@ -29,6 +29,7 @@ from cbdi.wire.common import ErrorReply, RunFinished
 from cbdi.wire.world import (
     ActionReply,
     ActionRequest,
+    ClockRequest,
     EpochAck,
     StatsRequest,
     Tick,
@@ -147,6 +148,7 @@ class WorldService:
         )
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
+        self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
 
     def start(self) -> None:
         """Declare every endpoint now and start the tasks of the service."""
@@ -158,6 +160,8 @@ class WorldService:
         ctx.start(
             serve(bus, keys.world_rpc("info"), WorldInfoRequest, self.on_info, ctx), name="info"
         )
+        clock = serve(bus, keys.world_rpc("clock"), ClockRequest, self.on_clock, ctx, trace=False)
+        ctx.start(clock, name="clock")
         acks = messages(bus, keys.epoch_ack_all(), EpochAck, ctx)
         ctx.start(self.follow_acks(acks), name="acks")
         ctx.start(self.run(), name="epochs")
@@ -191,6 +195,11 @@ class WorldService:
 
     async def on_info(self, key: str, req: WorldInfoRequest) -> Message:
         return self.info
+
+    async def on_clock(self, key: str, req: ClockRequest) -> Message:
+        if self.last_tick is None:
+            return ErrorReply(code="not_started", message="epoch 0 has not started")
+        return self.last_tick
 
     async def follow_acks(self, acks: AsyncIterator[tuple[str, EpochAck]]) -> None:
         async for key, ack in acks:
@@ -255,6 +264,7 @@ class WorldService:
             speed=self.settings.speed,
             lockstep=self.settings.lockstep,
         )
+        self.last_tick = tick
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
             await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)

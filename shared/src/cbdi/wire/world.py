@@ -32,6 +32,7 @@ __all__ = [
     "AgentView",
     "BinView",
     "Cell",
+    "ClockRequest",
     "EpochAck",
     "LitterView",
     "OutcomeStatus",
@@ -168,6 +169,11 @@ class WorldSnapshot(Message, frozen=True, tag="cbdi.world.WorldSnapshot/1"):
     people: Many[PersonView]
     litter: Many[LitterView]
     recycled: Many[Symbol]
+
+
+class ClockRequest(Message, frozen=True, tag="cbdi.world.ClockRequest/1"):
+    """Ask for the world's latest tick (an `ErrorReply` `not_started` before epoch 0): a
+    member restarted mid-run joins at the epoch under way."""
 
 
 class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"):

@@ -542,7 +542,9 @@ def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -
             )
             stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
             ctx.start(service.inputs(stream), name="planner")
-        ready = announce_ready(ctx.bus, settings.agent, "planner", service.lockstep.decided)
+        ready = announce_ready(
+            ctx.bus, settings.agent, "planner", service.lockstep.decided, lockstep=service.lockstep
+        )
         ctx.start(ready, name="ready")
 
     return body
