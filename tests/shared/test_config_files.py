@@ -191,6 +191,11 @@ def test_a_domain_action_nobody_performs_stops_cbdi_up_before_it_starts(tmp_path
         )
         if performers:
             assert load_scenario(path).agents[0].name == "robot1"
+            # Performers act in real time: a lockstep run with them is refused.
+            done = subprocess.run(
+                [str(CBDI), "up", str(path), "--lockstep"], capture_output=True, text=True
+            )
+            assert done.returncode == 2 and "performers act in real time (drive)" in done.stderr
             continue
         with pytest.raises(CbdiError, match=rf"{domain}:{line}: action drive: nobody performs"):
             load_scenario(path)

@@ -51,6 +51,7 @@ __all__ = [
     "check_until",
     "find_scenario",
     "load_scenario",
+    "performer_actions",
 ]
 
 # Components each agent kind runs; the scripted agent stands in for a whole BDI agent and
@@ -226,6 +227,15 @@ def load_scenario(path: Path) -> Scenario:
     )
     check_performed(scenario)
     return scenario
+
+
+def performer_actions(scenario: Scenario) -> list[str]:
+    """The actions the scenario's BDI agents leave to performers (`cbdi.performer`)."""
+    found: set[str] = set()
+    for agent in scenario.agents:
+        if agent.kind == "bdi" and agent.agent_file is not None:
+            found.update(read_agent_file(agent.agent_file, agent.name).performers)
+    return sorted(found)
 
 
 def check_performed(scenario: Scenario) -> None:
