@@ -169,7 +169,12 @@ def test_a_run_split_over_two_projects_with_joined_routers(
         assert started.returncode == 0, started.stderr[-2000:]
         up = _compose(here, a, podman_socket, "up", "--exit-code-from", "wait")
         assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+        try:
+            _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
+        except AssertionError:
+            logs = _compose(there, b, podman_socket, "logs", "--no-color")
+            print("the second project's logs:\n" + logs.stdout[-12000:])
+            raise
     finally:
         _compose(there, b, podman_socket, "down")
         _compose(here, a, podman_socket, "down")
-    _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
