@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner domains/recycling
+PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner domains/recycling domains/courier
 PYTEST_ARGS ?=
 
 .PHONY: venv demo test lint bench bench-planner bench-continual bench-table1 clean system-tools image
@@ -49,7 +49,7 @@ test: venv system-tools
 lint: venv
 	$(BIN)/ruff check shared services domains tests benchmarks
 	$(BIN)/mypy --strict shared/src/cbdi
-	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src
+	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src domains/courier/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py

@@ -34,7 +34,7 @@ from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.view import world_info
 from cbdi.wire.base import Message
-from cbdi.wire.world import ACK_STAGES, ClockRequest, EpochAck, Percepts, Tick
+from cbdi.wire.world import ACK_STAGES, PERCEPTS, ClockRequest, EpochAck, Tick
 
 __all__ = [
     "WORLD",
@@ -134,7 +134,7 @@ class EpochGate:
                     s.received = {}  # the sender restarted: its counts start afresh
                 s.buffer.append(item)
                 s.received[key] = max(s.received.get(key, 0), seq)
-                if isinstance(msg, Percepts):
+                if isinstance(msg, PERCEPTS):
                     s.world_epoch = max(s.world_epoch, msg.epoch)
             self.changed.notify_all()
 
@@ -197,7 +197,7 @@ class EpochGate:
                 (
                     i + 1
                     for i, item in enumerate(s.buffer)
-                    if isinstance(item.message, Percepts) and item.message.epoch >= need.epoch
+                    if isinstance(item.message, PERCEPTS) and item.message.epoch >= need.epoch
                 ),
                 len(s.buffer) if need.epoch < 0 else 0,
             )

@@ -31,7 +31,7 @@ from cbdi.wire.agent import (
     PartialPlan,
 )
 from cbdi.wire.base import Message
-from cbdi.wire.world import ActionOutcome, ActionReply, EpochAck, Percepts, Tick
+from cbdi.wire.world import PERCEPTS, ActionOutcome, ActionReply, EpochAck, Percepts, Sensed, Tick
 from cbdi_executor.dispatcher import Dispatcher, Effects
 
 __all__ = ["ExecutorService", "ExecutorSettings", "executor_main"]
@@ -43,6 +43,7 @@ INPUTS: tuple[type[Message], ...] = (
     EarlyArrest,
     ActionOutcome,
     Percepts,
+    Sensed,
     EpochAck,
 )
 
@@ -105,7 +106,7 @@ class ExecutorService:
         """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""
         async for item in stream:
             for key, m in await self.lockstep.put(item):
-                if not isinstance(m, EpochAck | Percepts):
+                if not isinstance(m, (EpochAck, *PERCEPTS)):
                     with dropping(self.ctx, key, m):
                         await self.handle(m)
                     await self.maybe_ack()
@@ -128,7 +129,7 @@ class ExecutorService:
             self.holding = True
             try:
                 for key, msg in released.messages:
-                    if not isinstance(msg, EpochAck | Percepts):
+                    if not isinstance(msg, (EpochAck, *PERCEPTS)):
                         with dropping(self.ctx, key, msg):
                             await self.handle(msg)
             finally:

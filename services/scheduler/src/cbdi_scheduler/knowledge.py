@@ -19,7 +19,7 @@ from typing import Protocol, cast
 
 from cbdi.beliefs import Belief, BeliefSet
 from cbdi.plugins import installed, load_plugin
-from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
+from cbdi.wire.world import ActionOutcome, Percepts, Sensed, WorldInfo
 
 __all__ = ["GROUP", "DomainKnowledge", "available", "load_knowledge"]
 
@@ -33,8 +33,9 @@ class DomainKnowledge(Protocol):
         """The beliefs the world's map gives."""
         ...
 
-    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts) -> BeliefSet:
-        """`beliefs` revised with one epoch's percepts."""
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts | Sensed) -> BeliefSet:
+        """`beliefs` revised with one epoch's percepts (the grid world's, or a simulator's
+        generic `Sensed`)."""
         ...
 
     def on_outcome(self, beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:

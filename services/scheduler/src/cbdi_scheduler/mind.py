@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 
 from cbdi.beliefs import Belief, BeliefSet, fact
 from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
-from cbdi.wire.world import ActionOutcome, Percepts
+from cbdi.wire.world import ActionOutcome, Percepts, Sensed
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, Drop, achieved, drops, select_desire
@@ -65,7 +65,7 @@ class Mind:
             goal=[list(g.atom) for g in desire.goal],
         )
 
-    def on_percepts(self, p: Percepts) -> Reaction:
+    def on_percepts(self, p: Percepts | Sensed) -> Reaction:
         """Run one BDI cycle on this epoch's percepts."""
         self.now, self.epoch = p.time, p.epoch
         before = self.beliefs

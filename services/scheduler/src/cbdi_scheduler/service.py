@@ -35,7 +35,7 @@ from cbdi.wire.agent import (
 )
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
-from cbdi.wire.world import ActionOutcome, EpochAck, Percepts, Tick
+from cbdi.wire.world import PERCEPTS, ActionOutcome, EpochAck, Percepts, Sensed, Tick
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
 from cbdi_scheduler.requests import serve_request
@@ -45,6 +45,7 @@ __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
 
 INPUTS: tuple[type[Message], ...] = (
     Percepts,
+    Sensed,
     ActionOutcome,
     PartialPlan,
     SearchStatus,
@@ -135,7 +136,7 @@ class SchedulerService:
         if isinstance(msg, EpochAck | Tick):
             return
         reaction = self.react(msg)
-        if isinstance(msg, Percepts):  # beliefs first: the planner plans from them
+        if isinstance(msg, PERCEPTS):  # beliefs first: the planner plans from them
             update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
             await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
         await self.act(reaction)
@@ -235,7 +236,7 @@ class SchedulerService:
 
     def react(self, msg: Message) -> Reaction:
         mind = self.mind
-        if isinstance(msg, Percepts):
+        if isinstance(msg, PERCEPTS):
             return mind.on_percepts(msg)
         if isinstance(msg, ActionOutcome):
             return mind.on_outcome(msg)

@@ -24,6 +24,7 @@ from cbdi.errors import CbdiError
 from cbdi.plugins import load_binding
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
+from cbdi.simulator import EpochResult, Simulator, SimulatorConfig, load_simulator
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply, RunFinished
 from cbdi.wire.world import (
@@ -40,7 +41,7 @@ from cbdi_world.chance import Chance
 from cbdi_world.errors import UnknownAgentError, WorldError
 from cbdi_world.maps import load_map, with_situation
 from cbdi_world.trace import RequestTrace
-from cbdi_world.world import AgentSpec, EpochResult, World
+from cbdi_world.world import AgentSpec, World
 
 __all__ = ["WorldService", "WorldSettings", "agent_specs", "build_world", "world_main"]
 
@@ -104,6 +105,13 @@ class WorldSettings(ServiceSettings):
         default="recycling",
         metadata={"help": "how PDDL actions map to the world's (entry point cbdi.bindings)"},
     )
+    simulator: str = field(
+        default="",
+        metadata={
+            "help": "host this domain simulator (entry point cbdi.simulators) instead of the "
+            "grid world; the grid world's options above do not apply to it"
+        },
+    )
 
 
 def agent_specs(
@@ -130,7 +138,11 @@ class WorldService:
     """Adapter between the bus and one `World`."""
 
     def __init__(
-        self, ctx: ServiceContext, world: World, settings: WorldSettings, clock: Clock | None = None
+        self,
+        ctx: ServiceContext,
+        world: Simulator,
+        settings: WorldSettings,
+        clock: Clock | None = None,
     ) -> None:
         self.ctx = ctx
         self.world = world
@@ -139,12 +151,16 @@ class WorldService:
         self.agents = [a for a in world.info().agents]
         self.members = members_of(settings.member, self.agents)
         self.acks = AckTracker(self.members)
-        self.binding = load_binding(settings.binding, "--binding")
+        # The grid world performs PDDL actions through its domain's binding; a hosted
+        # simulator performs them itself.
+        self.binding = None if settings.simulator else load_binding(settings.binding, "--binding")
+        actions = self.binding.actions if self.binding else getattr(type(world), "actions", ())
         self.info = replace(
             world.info(),
             members=list(self.members),
             lockstep=settings.lockstep,
-            actions=list(self.binding.actions),
+            actions=list(actions),
+            simulator=settings.simulator,
         )
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
@@ -168,8 +184,10 @@ class WorldService:
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
         try:
-            self.world.agent(req.agent)
-            reply = self.world.request(self.binding.primitive(req) if req.args else req)
+            if req.agent not in self.agents:
+                raise UnknownAgentError(req.agent)
+            bound = self.binding.primitive(req) if self.binding and req.args else req
+            reply = self.world.request(bound)
         except UnknownAgentError as exc:
             self.ctx.counters["unknown_agent"] += 1
             self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
@@ -189,6 +207,8 @@ class WorldService:
 
     async def on_stats(self, key: str, req: StatsRequest) -> Message:
         try:
+            if req.agent and req.agent not in self.agents:
+                raise UnknownAgentError(req.agent)
             return self.world.stats(req.agent)
         except UnknownAgentError as exc:
             return ErrorReply(code="unknown_agent", message=str(exc))
@@ -294,13 +314,16 @@ class WorldService:
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)
 
 
-def build_world(settings: WorldSettings) -> World:
-    """Load the map and place the agents; raise a CbdiError/WorldError naming what is wrong."""
+def build_world(settings: WorldSettings) -> Simulator:
+    """Load the map and place the agents (the grid world, or the `--simulator`); raise a
+    CbdiError/WorldError naming what is wrong."""
     if not settings.map:
         raise WorldError("no map given (--map FILE)")
-    load_binding(settings.binding, "--binding")  # a name not installed: said at start
     if not (math.isfinite(settings.linger) and settings.linger >= 0):
         raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
+    if settings.simulator:
+        return host_simulator(settings)
+    load_binding(settings.binding, "--binding")  # a name not installed: said at start
     world_map = with_situation(
         load_map(settings.map),
         move_step=settings.move_step,
@@ -320,7 +343,29 @@ def build_world(settings: WorldSettings) -> World:
     return World(world_map, specs, seed=settings.seed, chance=chance)
 
 
-def world_main(world: World, clock: Clock | None = None) -> ServiceMain:
+def host_simulator(settings: WorldSettings) -> Simulator:
+    """Build the `--simulator` from its map, agents and seed; a map it refuses is a
+    WorldError naming the simulator (never a traceback)."""
+    simulator = load_simulator(settings.simulator, "--simulator")
+    agents = tuple(a.partition(":")[0] for a in settings.agent or ("robot1",))
+    for name in agents:
+        try:
+            keys.validate_name(name)
+        except ValueError as exc:
+            raise WorldError(f"--agent {name!r}: {exc}") from None
+    if len(set(agents)) != len(agents):
+        raise WorldError("agent names must be unique")
+    members_of(settings.member, list(agents))
+    config = SimulatorConfig(map=settings.map, agents=agents, seed=settings.seed)
+    try:
+        return simulator(config)
+    except CbdiError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise WorldError(f"simulator {settings.simulator!r}, map {settings.map}: {exc}") from None
+
+
+def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
     """Return the service body serving `world` (built before the bus is opened); `clock`
     paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read)."""
 

@@ -13,6 +13,7 @@ import random
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
+from cbdi.simulator import EpochResult
 from cbdi.wire.world import (
     ActionOutcome,
     ActionReply,
@@ -47,18 +48,6 @@ class AgentSpec:
     name: str
     start: Cell
     detection_depth: int = 1
-
-
-@dataclass(frozen=True)
-class EpochResult:
-    """What one epoch produced, for the service to publish."""
-
-    epoch: int
-    time: float
-    outcomes: list[ActionOutcome]
-    percepts: list[Percepts]
-    snapshot: WorldSnapshot
-    spawned: list[str]
 
 
 @dataclass
@@ -372,7 +361,7 @@ class World:
         """Per-agent counters (one agent, or all when `agent` is empty) and litter totals."""
         names = [self.agent(agent).spec.name] if agent else list(self.agents)
         rows = [
-            AgentStats(agent=n, busy=round(self.agents[n].busy, 9), **self.agents[n].stats)
+            AgentStats(agent=n, busy=round(self.agents[n].busy, 9), **self.agents[n].stats)  # type: ignore[arg-type]
             for n in names
         ]
         return WorldStats(

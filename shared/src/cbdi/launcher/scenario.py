@@ -39,6 +39,7 @@ from cbdi.agentfile import AgentFileError, domain_actions, read_agent_file
 from cbdi.chance import chance_problems
 from cbdi.errors import ConfigError
 from cbdi.plugins import load_binding
+from cbdi.simulator import load_simulator
 
 __all__ = [
     "AGENT_KINDS",
@@ -92,6 +93,7 @@ class RunSettings:
     duration_noise: float = 0.0  # actions last a seeded 0..F longer (whole epochs)
     failure_probability: float = 0.0  # accepted actions fail at their end with this chance
     binding: str = "recycling"  # how the world performs PDDL actions (cbdi.bindings)
+    simulator: str = ""  # a domain's simulator the world hosts (cbdi.simulators; "": grid)
 
 
 PLANNING_MODES = ("", "online", "offline")
@@ -171,13 +173,19 @@ class Scenario:
         return replace(self, agents=tuple(agents))
 
 
+def _domain_scenarios(domains: Path) -> list[Path]:
+    """Each domain's scenario folder under `domains` (recycling first, then by name)."""
+    found = sorted(domains.glob("*/scenarios"), key=lambda p: (p.parent.name != "recycling", p))
+    return [p for p in found if p.is_dir()]
+
+
 def _repo_scenarios() -> list[Path]:
-    places = [Path.cwd() / "domains" / "recycling" / "scenarios"]
+    places = _domain_scenarios(Path.cwd() / "domains")
     env = os.environ.get("CBDI_DOMAINS")
     if env:
-        places.insert(0, Path(env) / "recycling" / "scenarios")
+        places = _domain_scenarios(Path(env)) + places
     # An editable install sits in the repository: shared/src/cbdi/launcher/scenario.py.
-    places.append(Path(__file__).resolve().parents[4] / "domains" / "recycling" / "scenarios")
+    places += _domain_scenarios(Path(__file__).resolve().parents[4] / "domains")
     return places
 
 
@@ -241,7 +249,13 @@ def performer_actions(scenario: Scenario) -> list[str]:
 def check_performed(scenario: Scenario) -> None:
     """Refuse, before anything starts, a BDI agent whose domain has an action nobody
     performs: not the world (its binding) and not a performer the agent file names."""
-    binding = load_binding(scenario.run.binding, f"{scenario.path}: run.binding")
+    run = scenario.run
+    if run.simulator:
+        world_actions = load_simulator(run.simulator, f"{scenario.path}: run.simulator").actions
+        who = f"the world ({run.simulator!r} simulator)"
+    else:
+        world_actions = load_binding(run.binding, f"{scenario.path}: run.binding").actions
+        who = f"the world ({run.binding!r} binding)"
     for agent in scenario.agents:
         if agent.kind != "bdi" or agent.agent_file is None:
             continue
@@ -253,14 +267,14 @@ def check_performed(scenario: Scenario) -> None:
             declared = domain_actions(raw.domain.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(str(raw.domain), "file", f"cannot read it ({exc})") from None
-        performed = {a.lower() for a in binding.actions} | set(raw.performers)
+        performed = {a.lower() for a in world_actions} | set(raw.performers)
         for action, line in sorted(declared.items(), key=lambda kv: kv[1]):
             if action not in performed:
-                world = ", ".join(binding.actions)
+                world = ", ".join(world_actions) or "nothing"
                 raise ConfigError(
                     f"{raw.domain}:{line}",
                     f"action {action}",
-                    f"nobody performs it: the world ({scenario.run.binding!r} binding) "
+                    f"nobody performs it: {who} "
                     f"performs {world}, and {raw.source} names no performer for it "
                     f'(`performers = ["{action}"]` with a `cbdi.performer` running)',
                 )

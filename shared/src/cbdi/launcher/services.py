@@ -77,6 +77,8 @@ def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
     args += ["--duration-noise", str(run.duration_noise)]
     args += ["--failure-probability", str(run.failure_probability)]
     args += ["--binding", run.binding]
+    if run.simulator:
+        args += ["--simulator", run.simulator]
     for agent in scenario.agents:
         own = agent.detection_depth is not None and run.det_area < 0
         depth = f":{agent.detection_depth}" if own else ""

@@ -12,7 +12,9 @@ import msgspec
 
 from cbdi.wire.base import Message
 from cbdi.wire.fields import (
+    MAX_ITEMS,
     AgentName,
+    Atom,
     Cell,
     Count,
     Epoch,
@@ -25,6 +27,7 @@ from cbdi.wire.fields import (
 )
 
 __all__ = [
+    "PERCEPTS",
     "ActionOutcome",
     "ActionReply",
     "ActionRequest",
@@ -38,6 +41,7 @@ __all__ = [
     "OutcomeStatus",
     "Percepts",
     "PersonView",
+    "Sensed",
     "StatsRequest",
     "Tick",
     "WorldInfo",
@@ -135,6 +139,28 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     holding: Many[Symbol]
 
 
+class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
+    """What one agent senses this epoch, as belief changes: any simulator's percepts.
+
+    `instances` are objects first seen (name -> PDDL type), `add` the ground atoms sensed
+    true, `delete` those sensed false, `fluents` function values read. The generic
+    knowledge (`cbdi.literals.LiteralKnowledge`) applies them in that order; an atom
+    neither added nor deleted keeps what the agent believed.
+    """
+
+    agent: AgentName
+    epoch: Count
+    time: NonNegative
+    instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
+    add: Many[Atom] = []
+    delete: Many[Atom] = []
+    fluents: Many[tuple[Atom, Finite]] = []
+
+
+# The percept messages a world publishes (the grid world's, any simulator's).
+PERCEPTS = (Percepts, Sensed)
+
+
 class AgentView(Message, frozen=True, tag="cbdi.world.AgentView/1"):
     """One robot in a snapshot: logical cell, continuous pose, load and current action."""
 
@@ -199,6 +225,12 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     members: Many[Symbol] = []
     lockstep: bool = False
     actions: Many[Symbol] = []  # the PDDL actions the world performs (its binding's)
+    # What the map tells every agent at the start (a simulator's static beliefs): objects
+    # (name -> PDDL type), ground atoms and function values.
+    instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
+    facts: Many[Atom] = []
+    fluents: Many[tuple[Atom, Finite]] = []
+    simulator: Id = ""  # the simulator's name (cbdi.simulators; "" the grid world)
 
 
 ACK_STAGES = ("ready", "beliefs", "done")
@@ -234,6 +266,8 @@ class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
     rejected: Count = 0
     contacts: Count = 0
     busy: NonNegative = 0.0  # simulated seconds in actions that ended (the rest is idle)
+    # A simulator's own counters (deliveries, charges, ...), by name.
+    counts: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=256)] = {}
 
 
 class StatsRequest(Message, frozen=True, tag="cbdi.world.StatsRequest/1"):
@@ -243,13 +277,15 @@ class StatsRequest(Message, frozen=True, tag="cbdi.world.StatsRequest/1"):
 
 
 class WorldStats(Message, frozen=True, tag="cbdi.world.WorldStats/1"):
-    """Per-agent counters and the litter totals at `epoch`."""
+    """Per-agent counters and the totals at `epoch` (the grid world's litter totals, a
+    simulator's `totals`); `done` when the run's goals are all met."""
 
     epoch: Count
     time: NonNegative
     agents: Many[AgentStats]
-    litter_on_ground: Count
-    litter_held: Count
-    litter_recycled: Count
-    litter_spawned: Count
-    done: bool
+    litter_on_ground: Count = 0
+    litter_held: Count = 0
+    litter_recycled: Count = 0
+    litter_spawned: Count = 0
+    done: bool = False
+    totals: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=256)] = {}

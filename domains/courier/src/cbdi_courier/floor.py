@@ -1,0 +1,195 @@
+"""An office floor of the courier domain, read from a map file (TOML).
+
+    name = "office-9x5"
+    epoch_duration = 1.0       # simulated seconds per epoch
+    sensing = 1                # a robot senses the cells up to this far (square)
+    battery = 12               # every robot's capacity; robots start charged
+    door_close_probability = 0.05   # per epoch, per open door nobody stands in (seeded)
+    layout = [                 # '#' wall, '.' floor, 'C' dock, 'D' door, '1'-'9' robots
+      "#########",
+      "#1.D...C#",
+      "#########",
+    ]
+
+    [[parcels]]
+    name = "p1"
+    at = [6, 1]                # x (column), y (row)
+    to = [1, 1]
+
+    [[carts]]                  # a dynamic obstacle: rolls along its route and back
+    name = "cart1"
+    route = [[4, 1], [5, 1], [6, 1]]
+    step = 2                   # epochs per cell
+
+Every problem is a `ConfigError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cbdi.errors import ConfigError
+
+__all__ = ["Cart", "Floor", "Parcel", "cell_name", "load_floor"]
+
+Cell = tuple[int, int]
+
+
+def cell_name(c: Cell) -> str:
+    return f"c_{c[0]}_{c[1]}"
+
+
+@dataclass(frozen=True)
+class Parcel:
+    name: str
+    at: Cell
+    to: Cell
+
+
+@dataclass(frozen=True)
+class Cart:
+    name: str
+    route: tuple[Cell, ...]
+    step: int
+
+
+@dataclass(frozen=True)
+class Floor:
+    name: str
+    width: int
+    height: int
+    walls: frozenset[Cell]
+    doors: frozenset[Cell]
+    docks: frozenset[Cell]
+    starts: tuple[Cell, ...]
+    parcels: tuple[Parcel, ...]
+    carts: tuple[Cart, ...]
+    epoch_duration: float
+    sensing: int
+    battery: int
+    door_close_probability: float
+
+    def floor_cell(self, c: Cell) -> bool:
+        return 0 <= c[0] < self.width and 0 <= c[1] < self.height and c not in self.walls
+
+    def links(self, c: Cell) -> list[Cell]:
+        x, y = c
+        return [n for n in ((x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)) if self.floor_cell(n)]
+
+
+def _number(data: dict[str, Any], key: str, where: str, low: float, high: float) -> float:
+    value = data.get(key)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(where, key, f"expected a number, got {value!r}")
+    if not (math.isfinite(value) and low <= value <= high):
+        raise ConfigError(where, key, f"expected a number in [{low:g}, {high:g}], got {value!r}")
+    return float(value)
+
+
+def _cell(value: Any, where: str, field: str, floor_ok: Any) -> Cell:
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+    ):
+        raise ConfigError(where, field, f"expected a cell [x, y], got {value!r}")
+    cell = (value[0], value[1])
+    if not floor_ok(cell):
+        raise ConfigError(where, field, f"{list(cell)} is not a floor cell of the layout")
+    return cell
+
+
+def load_floor(path: str | Path) -> Floor:
+    """Read and check a courier map file."""
+    where = str(path)
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(where, "file", exc.strerror or str(exc)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(where, "file", f"not UTF-8 text (byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(where, "toml", str(exc)) from None
+    rows = data.get("layout")
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, str) and r for r in rows):
+        raise ConfigError(where, "layout", "expected a list of non-empty strings")
+    width = len(rows[0])
+    if any(len(r) != width for r in rows):
+        raise ConfigError(where, "layout", "every row must be as long as the first")
+    walls, doors, docks, starts = set(), set(), set(), {}
+    for y, row in enumerate(rows):
+        for x, ch in enumerate(row):
+            if ch == "#":
+                walls.add((x, y))
+            elif ch == "D":
+                doors.add((x, y))
+            elif ch == "C":
+                docks.add((x, y))
+            elif ch.isdigit() and ch != "0":
+                if ch in starts:
+                    raise ConfigError(where, "layout", f"robot start {ch} appears twice")
+                starts[ch] = (x, y)
+            elif ch != ".":
+                raise ConfigError(where, "layout", f"row {y}, column {x}: unknown cell {ch!r}")
+    height = len(rows)
+
+    def ok(c: Cell) -> bool:
+        return 0 <= c[0] < width and 0 <= c[1] < height and c not in walls
+
+    parcels: list[Parcel] = []
+    raw_parcels = data.get("parcels", [])
+    if not isinstance(raw_parcels, list):
+        raise ConfigError(where, "parcels", "expected a list of tables")
+    for i, raw in enumerate(raw_parcels):
+        field = f"parcels[{i}]"
+        if not isinstance(raw, dict):
+            raise ConfigError(where, field, "expected a table")
+        name = raw.get("name")
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ConfigError(where, f"{field}.name", f"expected a name, got {name!r}")
+        parcels.append(
+            Parcel(name, _cell(raw.get("at"), where, f"{field}.at", ok),
+                   _cell(raw.get("to"), where, f"{field}.to", ok))
+        )  # fmt: skip
+    if len({p.name for p in parcels}) != len(parcels):
+        raise ConfigError(where, "parcels", "parcel names must be unique")
+    carts: list[Cart] = []
+    raw_carts = data.get("carts", [])
+    if not isinstance(raw_carts, list):
+        raise ConfigError(where, "carts", "expected a list of tables")
+    for i, raw in enumerate(raw_carts):
+        field = f"carts[{i}]"
+        if not isinstance(raw, dict):
+            raise ConfigError(where, field, "expected a table")
+        name = raw.get("name")
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ConfigError(where, f"{field}.name", f"expected a name, got {name!r}")
+        route = raw.get("route")
+        if not isinstance(route, list) or not route:
+            raise ConfigError(where, f"{field}.route", "expected a list of cells")
+        cells = tuple(_cell(c, where, f"{field}.route", ok) for c in route)
+        for a, b in itertools.pairwise(cells):
+            if abs(a[0] - b[0]) + abs(a[1] - b[1]) != 1:
+                raise ConfigError(where, f"{field}.route", f"{list(a)} to {list(b)} is no step")
+        step = int(_number(raw, "step", where, 1, 1e6))
+        carts.append(Cart(name, cells, step))
+    return Floor(
+        name=str(data.get("name", Path(path).stem)),
+        width=width,
+        height=height,
+        walls=frozenset(walls),
+        doors=frozenset(doors),
+        docks=frozenset(docks),
+        starts=tuple(starts[k] for k in sorted(starts)),
+        parcels=tuple(parcels),
+        carts=tuple(carts),
+        epoch_duration=_number(data, "epoch_duration", where, 1e-3, 1e6),
+        sensing=int(_number(data, "sensing", where, 0, 1000)),
+        battery=int(_number(data, "battery", where, 1, 1e6)),
+        door_close_probability=_number(data, "door_close_probability", where, 0, 1),
+    )
