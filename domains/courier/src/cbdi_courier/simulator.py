@@ -346,9 +346,19 @@ class CourierSimulator:
         )
 
     def _sensed(self, robot: _Robot) -> Sensed:
+        """What `robot` senses, its own state as it will be once its running action
+        ends (what it does next starts then: the executor runs one action at a time),
+        so that a plan made mid-drive starts where the drive arrives."""
         d = self.floor.sensing
         (ax, ay) = robot.cell
-        add: list[list[str]] = [["at", robot.name, cell_name(robot.cell)]]
+        a = robot.action
+        going = a.target if a and a.name == "drive" and a.target and not a.broken else None
+        cell = going or robot.cell
+        carrying = a.args[1] if a and a.name == "grab" else robot.carrying
+        delivered = [*self.delivered, *([a.args[1]] if a and a.name == "drop" else [])]
+        opening = a.target if a and a.name == "open_door" else None
+        charging = a is not None and a.name == "charge"
+        add: list[list[str]] = [["at", robot.name, cell_name(cell)]]
         delete: list[list[str]] = []
         for y in range(ay - d, ay + d + 1):
             for x in range(ax - d, ax + d + 1):
@@ -356,21 +366,21 @@ class CourierSimulator:
                 if not self.floor.floor_cell(c):
                     continue
                 n = cell_name(c)
-                clear = not self._occupied(c)
+                clear = not self._occupied(c) or (going is not None and c == robot.cell)
                 (add if clear else delete).append(["clear", n])
                 if c in self.open:
-                    (add if self.open[c] else delete).append(["open", n])
-                if c != robot.cell:
+                    (add if self.open[c] or c == opening else delete).append(["open", n])
+                if c != cell:
                     delete.append(["at", robot.name, n])
                 for p in self.goal:
                     (add if self.parcels.get(p) == c else delete).append(["parcel_at", p, n])
         for p in self.goal:
-            (add if robot.carrying == p else delete).append(["carrying", robot.name, p])
-        add += [["delivered", p] for p in self.delivered]
+            (add if carrying == p else delete).append(["carrying", robot.name, p])
+        add += [["delivered", p] for p in delivered]
         for pred, holds in (
-            ("idle", robot.action is None),
-            ("empty", not robot.carrying),
-            ("charged", robot.charged),
+            ("idle", True),
+            ("empty", not carrying),
+            ("charged", robot.charged or charging),
         ):
             (add if holds else delete).append([pred, robot.name])
         return Sensed(
@@ -379,7 +389,9 @@ class CourierSimulator:
             time=self.time,
             add=add,
             delete=delete,
-            fluents=[(["battery", robot.name], robot.battery)],
+            fluents=[
+                (["battery", robot.name], float(self.floor.battery) if charging else robot.battery)
+            ],
         )
 
     def _snapshot(self) -> WorldSnapshot:

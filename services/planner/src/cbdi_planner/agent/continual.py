@@ -38,7 +38,9 @@ from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import (
     FAILS_LATER,
     HOLDS,
+    NG,
     Event,
+    G,
     ImprovedPlan,
     ModeChanged,
     PartialPlanFound,
@@ -204,11 +206,18 @@ class ContinualPlanner:
             # Nothing reaches the goal from these beliefs (grounding): a failed search,
             # blocked if only something that moves is in the way.
             if req.kind == "start":
-                self.search, self.line = None, None
+                self.search = None
+                if self.line is None or self.search_follows_nothing(self.line):
+                    self.line = None
             goal = self.request.goal if self.request is not None else req.goal
             return [self._failure(req.request_id, str(exc), goal)]
         except (GoalError, PlannerError) as exc:
             raise BadRequestError(req.request_id, str(exc)) from exc
+
+    @staticmethod
+    def search_follows_nothing(line: Line) -> bool:
+        """Whether no step of `line` runs (a new search need not follow it)."""
+        return not any(st == "running" for st in line.statuses.values())
 
     def _with_problem(self, req: SearchRequest) -> SearchRequest:
         """Take a request's own PDDL problem as the beliefs (and goal, if it has none)."""
@@ -241,8 +250,22 @@ class ContinualPlanner:
             self.request = req
             if self.line is not None and self.line.steps:
                 return self._from_committed("revise", self.request_task(req.goal))
+        executing = self.line
         self.request = replace(req, kind="start")
         self.line, self.last_forecast, self.repair_trigger = None, ("", "", ""), ""
+        if executing is not None and any(st == "running" for st in executing.statuses.values()):
+            # A step of the executing plan runs (a robot mid-drive): the new plan starts
+            # from the state it leaves and follows it (the executor lets it end).
+            task = self.task(req.goal)
+            self.line = executing
+            self._from_committed("new", task, min_commit_steps=0)
+            search = self.search
+            if search is not None:
+                if not reaches_goal(task, search.thread.state):
+                    self.search = None  # the line stays: a retry follows the step too
+                    raise Unsolvable("no action reaches the goal from these beliefs (relaxed)")
+                return [self._status(req.request_id, "searching")]
+            self.line = None
         task = self.request_task(req.goal)
         line = Line(self._plan_id(), "new", self.at_grid(self.now))
         self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
@@ -271,8 +294,10 @@ class ContinualPlanner:
         line, req = self.line, self.request
         if line is None or req is None or not line.steps:
             return []
-        if self.search is not None and self.search.purpose in ("repair", "revise"):
-            return []  # a repair is on its way
+        if self.search is not None and (
+            self.search.purpose in ("repair", "revise") or self.search.repairs is not None
+        ):
+            return []  # a repair, or a new plan following the running step, is on its way
         try:
             task = self.task(req.goal)
         except (GoalError, PlannerError) as exc:
@@ -325,12 +350,20 @@ class ContinualPlanner:
         return out
 
     def _from_committed(
-        self, purpose: str, task: Task, improve_on: float = math.inf
+        self,
+        purpose: str,
+        task: Task,
+        improve_on: float = math.inf,
+        min_commit_steps: int | None = None,
+        mode: str = G,
     ) -> list[Message]:
-        """Start a search from the committed state of the executing line."""
+        """Start a search from the committed state of the executing line (committing
+        the started steps and `min_commit_steps` more, by default the settings')."""
         line, req = self.line, self.request
         assert line is not None and req is not None
-        done = commit(task, line.steps, line.statuses, self.settings.min_commit_steps)
+        if min_commit_steps is None:
+            min_commit_steps = self.settings.min_commit_steps
+        done = commit(task, line.steps, line.statuses, min_commit_steps)
         state: State | None = done.state
         if state is None:
             self.log("commit_failed", plan=line.plan_id, reason=done.reason)
@@ -349,15 +382,20 @@ class ContinualPlanner:
                 budget=self.settings.improve_expansions,
             )
         else:
-            thread = self._thread(task, state, prefix=done.count)
+            thread = self._thread(task, state, prefix=done.count, mode=mode)
         self.search = Search(thread, new, purpose, req.request_id, repairs=line)
         self.log("search_from_committed", purpose=purpose, plan=new.plan_id, after=after)
         return []
 
-    def _thread(self, task: Task, state: State, prefix: int = 0) -> SearchThread:
+    def _thread(self, task: Task, state: State, prefix: int = 0, mode: str = G) -> SearchThread:
         settings = self.settings
         return SearchThread(
-            task, state, prefix, empty_rounds=settings.empty_rounds, agenda=settings.agenda
+            task,
+            state,
+            prefix,
+            empty_rounds=settings.empty_rounds,
+            agenda=settings.agenda,
+            mode=mode,
         )
 
     # -- rounds ---------------------------------------------------------------------------
@@ -392,7 +430,13 @@ class ContinualPlanner:
                 self.log("outdated", plan=search.line.plan_id, purpose=search.purpose)
                 self.search, self.repair_trigger = None, ""
                 self.last_forecast = ("", "", "")
-                return [self._round(search, e) for e in events if isinstance(e, RoundDone)]
+                rounds: list[Message] = [
+                    self._round(search, e) for e in events if isinstance(e, RoundDone)
+                ]
+                if search.purpose == "new":
+                    # A new plan must come: search again after what runs now.
+                    return rounds + self._again_from_committed(search, 0)
+                return rounds
         for event in events:
             if isinstance(event, RoundDone):
                 out.append(self._round(search, event))
@@ -404,6 +448,19 @@ class ContinualPlanner:
                 better = event  # a round may find several: the last is the best
             elif isinstance(event, ModeChanged):
                 self.log("fall_back", plan=search.line.plan_id, mode=event.mode)
+                thread = search.thread
+                if (
+                    isinstance(thread, SearchThread)
+                    and thread.sent
+                    and search.line is self.line
+                    and search.purpose == "new"
+                ):
+                    # Alg. 2 lines 11-14: the complete search starts over from the
+                    # committed state, not after the greedy partial plans already out
+                    # (they may lead where the goal is out of reach: a battery spent).
+                    return out + self._again_from_committed(
+                        search, self.settings.min_commit_steps, NG
+                    )
             elif isinstance(event, SearchFailed):
                 out += self._failed(search, event.reason)
         if better is not None and self.search is search:
@@ -420,6 +477,24 @@ class ContinualPlanner:
         if search.thread.finished and self.search is search:
             self.search = None
         return out
+
+    def _again_from_committed(
+        self, search: Search, min_commit_steps: int, mode: str = G
+    ) -> list[Message]:
+        """Replace `search` (a new plan's) by one from the committed state of the
+        executing line; report the search failed if there is no committed state."""
+        request = self.request
+        if request is None or self.line is None:
+            return []
+        self.search = None
+        try:
+            task = self.task(request.goal)
+        except (GoalError, PlannerError) as exc:
+            return self._failed(search, str(exc))
+        self._from_committed("new", task, min_commit_steps=min_commit_steps, mode=mode)
+        if self.search is None:
+            return self._failed(search, "the executing plan's committed part cannot be simulated")
+        return []
 
     def _failed(self, search: Search, reason: str) -> list[Message]:
         self.search = None
@@ -455,7 +530,7 @@ class ContinualPlanner:
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line
         first = len(line.steps)
-        if search.purpose != "new" and first == 0:
+        if (search.purpose != "new" or search.repairs is not None) and first == 0:
             self.line = line  # the new line takes over from the committed point
             self.last_forecast = ("", "", "")
             self.repair_trigger = ""

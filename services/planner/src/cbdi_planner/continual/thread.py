@@ -150,7 +150,12 @@ class SearchThread:
 
     def __post_init__(self) -> None:
         self.space = SearchSpace(
-            self.task, self.state, mode=G, epsilon=self.epsilon, now=self.now, agenda=self.agenda
+            self.task,
+            self.state,
+            mode=self.mode,
+            epsilon=self.epsilon,
+            now=self.now,
+            agenda=self.agenda,
         )
         self.origin = self.space.root
 
