@@ -1,0 +1,66 @@
+"""The courier domain end to end over real Zenoh: two BDI robots deliver every parcel.
+
+The generic services run the courier package's simulator (`--simulator courier` through
+the scenario), its knowledge and agent file. On the way, a forecast repair and a clean
+preemption (a low battery preempts a delivery; the executor stops after the running
+drive, the robot charges, the delivery is taken up again) must happen, and the recording
+passes `rerun mcap check` and `cbdi inspect`.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from cbdi.wire import decode
+from cbdi.wire.agent import ArrestReport, DesireEvent
+from cbdi_monitor.reader import read_messages
+from tests_support import BIN, cbdi_up, free_port
+
+pytestmark = pytest.mark.e2e
+
+
+def test_courier_robots_deliver_every_parcel(tmp_path: Path) -> None:
+    rec = tmp_path / "courier.mcap"
+    args = ["courier", "--lockstep", "--json", "--quiet", "--port", str(free_port())]
+    done = cbdi_up(*args, "--record", str(rec), timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(done.stdout)
+    assert report["result"] == "done", report["reason"]
+    assert report["planner"]["total"]["forecast_repairs"] >= 1
+    agents = report["stats"]["agents"]
+    assert sum(a["pickups"] for a in agents.values()) == 3  # every parcel grabbed once
+
+    recorded = list(read_messages(rec))
+    events = [
+        decode(m.payload, DesireEvent) for m in recorded if m.key.endswith("/scheduler/desires")
+    ]
+    arrests = [
+        decode(m.payload, ArrestReport) for m in recorded if m.key.endswith("/executor/arrested")
+    ]
+    recharged = [e for e in events if e.desire == "recharge" and e.event == "achieved"]
+    assert recharged, "no robot charged"
+    # A clean preemption: the delivery's plan was arrested for the recharge, and a
+    # delivery was pursued again after the robot charged.
+    assert arrests, "no early arrest"
+    after = min(e.time for e in recharged)
+    assert any(
+        e.desire == "deliver" and e.event == "activated" and e.time >= after for e in events
+    ), "no delivery taken up again after charging"
+    delivered = {
+        g[1] for e in events if e.desire == "deliver" and e.event == "achieved" for g in e.goal
+    }
+    assert delivered <= {"p1", "p2", "p3"}
+
+    check = subprocess.run(
+        [str(BIN / "rerun"), "mcap", "check", str(rec)], capture_output=True, text=True
+    )
+    assert check.returncode == 0, check.stdout + check.stderr
+    inspect = subprocess.run(
+        [str(BIN / "cbdi"), "inspect", str(rec)], capture_output=True, text=True
+    )
+    assert inspect.returncode == 0, inspect.stderr
+    assert "result: done" in inspect.stdout
