@@ -171,8 +171,11 @@ def render(report: Inspection) -> str:
     lines += [f"  {count:8d}  {key}" for key, count in report.channels.items()]
     for name, a in sorted(report.agents.items()):
         first = "-" if a.first_action_time is None else f"t={a.first_action_time:g}"
+        # moves and recycled are the recycling domain's; another domain's actions are
+        # counted on the next line
+        grid = f"moves={a.moves} recycled={a.recycled} " if a.moves or a.recycled else ""
         lines.append(
-            f"agent {name}: moves={a.moves} recycled={a.recycled} failed={a.failed} "
+            f"agent {name}: {grid}failed={a.failed} "
             f"requests={a.requests} first action at {first}"
         )
         lines.append("    " + " ".join(f"{k}={v}" for k, v in sorted(a.actions.items())))

@@ -397,7 +397,7 @@ def _settle(summary: RunSummary, reason: str, scenario: Scenario) -> None:
     elif reason == "time_limit":
         until_done = scenario.run.until == "done"
         summary.result = "incomplete" if until_done else "time_limit"
-        summary.reason = "time limit reached before all litter was recycled" if until_done else ""
+        summary.reason = "time limit reached before the world was done" if until_done else ""
     else:
         summary.result = "failed" if reason.startswith("failed") else reason
         summary.reason = reason
