@@ -175,8 +175,7 @@ def render(report: Inspection) -> str:
         # counted on the next line
         grid = f"moves={a.moves} recycled={a.recycled} " if a.moves or a.recycled else ""
         lines.append(
-            f"agent {name}: {grid}failed={a.failed} "
-            f"requests={a.requests} first action at {first}"
+            f"agent {name}: {grid}failed={a.failed} requests={a.requests} first action at {first}"
         )
         lines.append("    " + " ".join(f"{k}={v}" for k, v in sorted(a.actions.items())))
         if a.replans is not None:
