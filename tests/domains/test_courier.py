@@ -1,0 +1,106 @@
+"""The courier domain's simulator: its physics (battery, doors, the cart), what robots
+sense, and the world service hosting it on the in-memory bus with a manual clock."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from cbdi_courier.simulator import CourierSimulator
+from test_bad_input import alone
+
+from cbdi import keys
+from cbdi.bus import request
+from cbdi.clock import ManualClock
+from cbdi.errors import RequestFailedError
+from cbdi.runtime.together import TogetherService
+from cbdi.simulator import SimulatorConfig
+from cbdi.wire.world import ActionReply, ActionRequest, Sensed, WorldInfo, WorldInfoRequest
+from cbdi_world.service import WorldSettings, build_world, world_main
+from tests_support import REPO
+
+MAP = REPO / "domains/courier/maps/office-11x7.toml"
+
+
+def sim(tmp_path: Path, **changes: str) -> CourierSimulator:
+    text = MAP.read_text(encoding="utf-8")
+    for old, new in changes.items():
+        text = text.replace(old, new)
+    path = tmp_path / "office.toml"
+    path.write_text(text, encoding="utf-8")
+    return CourierSimulator(SimulatorConfig(map=str(path), agents=("robot1",), seed=1))
+
+
+def drive(s: CourierSimulator, src: str, dst: str, n: int = 1) -> ActionReply:
+    req = ActionRequest(
+        agent="robot1", action="drive", request_id=f"d{n}", args=["robot1", src, dst]
+    )
+    return s.request(req)
+
+
+def sensed(s: CourierSimulator) -> Sensed:
+    result = s.step()
+    (p,) = [p for p in result.percepts if isinstance(p, Sensed) and p.agent == "robot1"]
+    return p
+
+
+def test_a_drive_uses_charge_and_a_robot_senses_where_it_arrives(tmp_path: Path) -> None:
+    s = sim(tmp_path)
+    reply = drive(s, "c_1_4", "c_2_4")
+    assert reply.accepted and reply.ends_at == 2.0
+    mid = sensed(s)  # mid-drive: the robot's state as the drive leaves it
+    assert ["at", "robot1", "c_2_4"] in mid.add and ["idle", "robot1"] in mid.add
+    assert mid.fluents == [(["battery", "robot1"], 19.0)]
+    assert ["clear", "c_1_4"] in mid.add and ["clear", "c_2_4"] in mid.delete
+    end = s.step()
+    assert [o.status for o in end.outcomes] == ["succeeded"]
+    busy = drive(s, "c_2_4", "c_9_9", 2)
+    assert not busy.accepted and "not a floor cell" in busy.reason
+
+
+def test_an_empty_battery_refuses_a_drive_and_a_dock_fills_it(tmp_path: Path) -> None:
+    s = sim(tmp_path, **{"battery = 20": "battery = 1"})
+    assert drive(s, "c_1_4", "c_2_4").accepted
+    s.step(), s.step()
+    empty = drive(s, "c_2_4", "c_3_4", 2)
+    assert not empty.accepted and "battery is empty" in empty.reason
+
+
+def test_a_door_that_closes_during_a_drive_fails_it(tmp_path: Path) -> None:
+    s = sim(tmp_path, **{"door_close_probability = 0.04": "door_close_probability = 1.0"})
+    s.robots["robot1"].cell = (5, 2)
+    s.open[(4, 2)] = True
+    assert drive(s, "c_5_2", "c_4_2").accepted
+    result = s.step()  # the door closes on the first epoch: the drive is broken
+    result = s.step()
+    (outcome,) = result.outcomes
+    assert outcome.status == "failed" and "door at c_4_2 closed" in outcome.reason
+    assert s.robots["robot1"].cell == (5, 2)
+
+
+def test_an_unknown_action_is_refused_naming_the_courier_actions(tmp_path: Path) -> None:
+    s = sim(tmp_path)
+    req = ActionRequest(agent="robot1", action="move", request_id="m", args=["robot1", "c_1_4"])
+    reply = s.request(req)
+    assert not reply.accepted and "drive" in reply.reason and "charge" in reply.reason
+
+
+async def test_the_world_service_hosts_the_courier_simulator() -> None:
+    settings = WorldSettings(
+        map=str(MAP), agent=("robot1", "robot2"), wait_agents=0, simulator="courier"
+    )
+    shell = TogetherService("world", settings, world_main(build_world(settings), ManualClock()))
+    async with alone(shell) as (bus, _ctx):
+        info = await request(bus, keys.world_rpc("info"), WorldInfoRequest(), WorldInfo)
+        assert info.simulator == "courier"
+        assert ["dock", "c_5_5"] in info.facts and info.instances["p1"] == "parcel"
+        act = keys.world_rpc("act")
+        go = ActionRequest(
+            agent="robot1", action="drive", request_id="r1", args=["robot1", "c_1_4", "c_1_5"]
+        )
+        assert (await request(bus, act, go, ActionReply)).accepted
+        stranger = ActionRequest(
+            agent="robot9", action="drive", request_id="r2", args=["robot9", "c_3_4", "c_3_5"]
+        )
+        with pytest.raises(RequestFailedError, match="unknown agent 'robot9'"):
+            await request(bus, act, stranger, ActionReply)
