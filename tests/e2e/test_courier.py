@@ -4,7 +4,7 @@ The generic services run the courier package's simulator (`--simulator courier` 
 the scenario), its knowledge and agent file. On the way, a forecast repair and a clean
 preemption (a low battery preempts a delivery; the executor stops after the running
 drive, the robot charges, the delivery is taken up again) must happen, and the recording
-passes `rerun mcap check` and `cbdi inspect`.
+passes `rerun mcap check`, converts to a rerun file and reads in `cbdi inspect`.
 """
 
 from __future__ import annotations
@@ -59,6 +59,15 @@ def test_courier_robots_deliver_every_parcel(tmp_path: Path) -> None:
         [str(BIN / "rerun"), "mcap", "check", str(rec)], capture_output=True, text=True
     )
     assert check.returncode == 0, check.stdout + check.stderr
+    rrd = tmp_path / "courier.rrd"  # the rerun view of it
+    view = subprocess.run(
+        [str(BIN / "cbdi"), "view", str(rec), "--rrd", str(rrd)], capture_output=True, text=True
+    )
+    assert view.returncode == 0, view.stderr
+    verify = subprocess.run(
+        [str(BIN / "rerun"), "rrd", "verify", str(rrd)], capture_output=True, text=True
+    )
+    assert verify.returncode == 0, verify.stdout + verify.stderr
     inspect = subprocess.run(
         [str(BIN / "cbdi"), "inspect", str(rec)], capture_output=True, text=True
     )
