@@ -59,7 +59,7 @@ class AgentFile:
     rtc_deadline: float = 2.0  # the executing desire's deadline: this many times its span
     wait_stall: float = 8.0  # s a blocked wait may see nothing change before it counts
     claim: tuple[str, ...] = ()  # goal predicates whose first argument the group shares out
-    knowledge: str = "recycling"  # the domain knowledge (cbdi_scheduler.knowledge) to load
+    knowledge: str = "literals"  # the domain knowledge (cbdi.knowledge entry point) to load
     beliefs: tuple[Belief, ...] = ()
     desires: tuple[Desire, ...] = ()
     rules: tuple[ReactiveRule, ...] = ()
@@ -102,7 +102,7 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         exec_retries=r.natural(bdi, "exec_retries", 3, "scheduler"),
         rtc_deadline=_rtc_deadline(r.opt(bdi, "rtc_deadline", float, 2.0, "scheduler"), source),
         wait_stall=_wait_stall(r.opt(bdi, "wait_stall", float, 8.0, "scheduler"), source),
-        knowledge=_knowledge(r.opt(data, "knowledge", str, "recycling"), source),
+        knowledge=_knowledge(r.opt(data, "knowledge", str, "literals"), source),
         claim=tuple(
             r.check(p, str, f"scheduler.claim[{i}]")
             for i, p in enumerate(r.opt(bdi, "claim", list, [], "scheduler"))

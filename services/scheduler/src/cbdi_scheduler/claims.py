@@ -1,7 +1,7 @@
 """Claims: how agents of one group avoid pursuing the same goal object (pure logic).
 
-An agent file lists claimable goal predicates (`[scheduler] claim = ["recycled"]`). When
-a desire's goal holds an atom of one (`(recycled pla61)`), the agent claims its first
+An agent file lists claimable goal predicates (`[scheduler] claim = ["delivered"]`). When
+a desire's goal holds an atom of one (`(delivered p1)`), the agent claims its first
 argument (the item) in its group: it tells every agent of the group, who tell it of
 theirs. Every agent computes the same assignment from the same claims, with no further
 round of messages: only claims made within `WINDOW` epochs of an item's first claim
@@ -9,7 +9,7 @@ compete for it (agents that saw it at about the same time; a later claim never t
 an item over); items are assigned in order of their earliest claim, then their
 cheapest claim (`cost`: the claimer's path length to it), and each goes to the claimer
 with the lowest cost plus `LOAD_COST` for every item it already got (so one robot near
-all the litter does not get all of it), ties to the first name. An agent that holds an
+all the items does not get all of them), ties to the first name. An agent that holds an
 item claims it again with cost `HOLDING` (negative), and a holder owns its item whatever
 the other claims say; an agent strips the
 atoms of items others own from its desires, and drops a desire left with no goal. A

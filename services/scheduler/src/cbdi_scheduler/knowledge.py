@@ -7,8 +7,8 @@ the entry-point group `cbdi.knowledge`, named by the agent file's `knowledge` ke
 - the beliefs the world's map gives (`map_beliefs`, the paper's `map_loaded`);
 - how one epoch's percepts and an action's outcome revise the beliefs (the Events
   Monitor; it may keep memory of its own, such as obstacles seen lately);
-- what a claim on a goal object costs the agent (for the recycling robots: the believed
-  path length to the item), so that a group shares its goals out;
+- what a claim on a goal object costs the agent (for robots on a map: the believed path
+  length to the item), so that a group shares its goals out;
 - which objects the agent holds (a claim on an object in hand always wins).
 """
 

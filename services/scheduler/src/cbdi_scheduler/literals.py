@@ -1,10 +1,10 @@
 """Read beliefs and condition literals written the PDDL way, as agent files do.
 
 (map_loaded)                     a predicate belief, or a `T` check
-(not (holding {self} *))         an `F` check
-(exists {x} - plastic)           an `EX` check;   `pla61 - plastic`  an instance belief
-(= (loaded_amount {self}) 0)     a function belief, or an `EQ` check
-(< (loaded_amount {self}) 3)     numeric checks: < <= > >= = !=
+(not (carrying {self} *))        an `F` check
+(exists {x} - parcel)            an `EX` check;   `p1 - parcel`  an instance belief
+(= (battery {self}) 20)          a function belief, or an `EQ` check
+(< (battery {self}) 10)          numeric checks: < <= > >= = !=
 """
 
 from __future__ import annotations

@@ -75,7 +75,7 @@ class Mind:
         self.requested = []
         if out.beliefs_changed or self.epoch == 0 or self.refire:
             # After a drop the rules fire again even on unchanged beliefs: what made the
-            # desire (litter still lying there) may well make it again.
+            # desire (an object still waiting there) may well make it again.
             self.refire = False
             self._fire(out)
         self._coordinate(out)

@@ -3,7 +3,7 @@
 Each rule fires once for every binding of its condition's placeholders; its effects add
 or delete beliefs, add or delete desires, or BOOST a desire (extend its goal with the
 given literals; the desire is added if the agent does not hold it yet). This is how the
-paper's recycling agent reacts to sensing litter: `recycled(x)` joins the current goal.
+paper's agent reacts to sensing a new object: its goal atom joins the current goal.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ of the functions no action changes) and reused for every belief set with that ke
 initial state lies within what the cached grounding reaches.
 
 For the cached task to serve while people walk, it is grounded from the beliefs plus
-every transient fact seen before (`Transients`: for recycling, the `free` cells people
+every transient fact seen before (`Transients`: the `free` cells people
 walked off): a cell taken now is free in the grounding, so its moves exist and the task
 need not be grounded again when the person walks on. Relaxed reachability is monotone in
 the initial state, so the task holds every action a task grounded from the current
