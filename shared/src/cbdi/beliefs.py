@@ -31,7 +31,7 @@ __all__ = [
     "to_wire",
 ]
 
-Atom = tuple[str, ...]  # ("litter_pose", "pla61", "c_6_1"): a predicate or function and its args
+Atom = tuple[str, ...]  # ("parcel_at", "p1", "c_6_1"): a predicate or function and its args
 
 INSTANCE, PREDICATE, FUNCTION = "instance", "predicate", "function"
 

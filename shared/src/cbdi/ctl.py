@@ -4,7 +4,7 @@
     cbdi ctl desire add robot1 visit "(in robot1 c_3_3)" --priority 0.9 --deadline 60 \\
         [--precondition "(map_loaded)"] [--context "(not (holding robot1 pla1))"]
     cbdi ctl desire remove robot1 visit          cbdi ctl desire check robot1 visit
-    cbdi ctl belief add robot1 "(recycled pla1)"   (also remove, check)
+    cbdi ctl belief add robot1 "(delivered p1)"   (also remove, check)
     cbdi ctl stop robot1 [robot2 ...] | --all      cbdi ctl resume robot1 | --all
 
 `stop` is a safe stop: each agent cancels its search, lets the step running now end (a
@@ -154,7 +154,7 @@ def _parser() -> argparse.ArgumentParser:
     for op in ("add", "remove", "check"):
         one = leaf(bsub, op, f"{op} a belief")
         one.add_argument("agent")
-        one.add_argument("belief", help="e.g. '(recycled pla1)'")
+        one.add_argument("belief", help="e.g. '(delivered p1)'")
     for op, text in (("stop", "stop agents safely"), ("resume", "resume stopped agents")):
         one = leaf(sub, op, text)
         one.add_argument("agents", nargs="*", metavar="AGENT")

@@ -195,7 +195,7 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     `op` is `check_belief`, `add_belief`, `del_belief`, `check_desire`, `add_desire`,
     `del_desire`, or `halt` (a safe stop: the running step ends, nothing more starts,
     every desire is kept and its deadline waits) and `resume`; beliefs, goal literals and
-    condition literals are written as in agent files (`(litter_pose pla61 c_6_1)`,
+    condition literals are written as in agent files (`(parcel_at p1 c_6_1)`,
     `(not (holding {self} *))`). It is served only
     if `group` is one of this agent's allowed groups. `deadline` is relative to the
     time the desire is added (0: none).

@@ -31,7 +31,7 @@ FORECAST_KINDS = ("fails_in_committed", "fails_after_committed", "holds")
 class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
     """Start a search for `goal` from the agent's current beliefs, revise its goal, or cancel.
 
-    `goal` holds ground atoms (`["recycled", "pla61"]`) that must all hold at the end.
+    `goal` holds ground atoms (`["delivered", "p1"]`) that must all hold at the end.
     `problem`, if given, is a PDDL problem over the agent's domain: its objects and initial
     state replace the agent's beliefs (until the next belief update), and its goal is the
     goal when `goal` is empty. It lets a user drive one planner service directly.
