@@ -42,7 +42,8 @@ class ErrorReport(Message, frozen=True, tag="cbdi.ErrorReport/1"):
 
 
 class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
-    """Announce that a run ended: `reason` is `done` (the world reached its goal) or `time_limit`."""
+    """Announce that a run ended: `reason` is `done` (the world reached its goal) or
+    `time_limit`."""
 
     reason: Symbol
     epoch: Count
