@@ -96,6 +96,7 @@ async def run(args: argparse.Namespace, times: Times, sizes: list[int]) -> RunFi
     agents = [f"robot{k + 1}" for k in range(args.agents)]
     members = tuple(f"{a}/{c}" for a in agents for c in ("planner", "scheduler", "executor"))
     settings = WorldSettings(
+        simulator="recycling",
         map=str(ROOT / "domains/recycling/maps" / f"{args.map}.toml"),
         agent=tuple(agents),
         speed=0.0,

@@ -3,7 +3,7 @@
 - static optimum: every litter item known, no people; `cbdi problem MAP --litter all`
   planned by `cbdi plan --anytime` (22 moves on the paper's 7x7 map);
 - clairvoyant: every item known and the people's walk given to the planner as timed
-  initial literals. The walk comes from the world core (`cbdi_world.world.World`), built
+  initial literals. The walk comes from the world core (`cbdi_recycling.world.World`), built
   from the run's own `cbdi up` flags (seeded phase and jitter included), with the robot
   standing still on its start cell, so people are never held up by it; in a real run a
   robot in the way makes a person wait, and actions take their domain durations here
@@ -29,12 +29,12 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from cbdi_recycling.maps import WorldMap
+from cbdi_recycling.problem import cell_name, problem_text
+from cbdi_recycling.world import World
 from table1_runner import CBDI, execute
 
 from cbdi.wire.world import Cell
-from cbdi_world.maps import WorldMap
-from cbdi_world.problem import cell_name, problem_text
-from cbdi_world.world import World
 
 __all__ = [
     "HORIZON",

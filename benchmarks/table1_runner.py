@@ -116,8 +116,8 @@ def up_argv(task: Task, options: UpOptions, port: int) -> list[str]:
     """Build the `cbdi up` command of a task (pass-through arguments before the clock's)."""
     s = task.situation
     argv = [CBDI, "up", options.scenario, "--json", "--quiet", "--mode", task.mode]
-    argv += ["--seed", str(task.seed), "--move-step", str(s.move_step)]
-    argv += ["--det-area", str(s.det_area), "--known-litter", str(s.known_litter)]
+    argv += ["--seed", str(task.seed), "--option", f"move_step={s.move_step}"]
+    argv += ["--option", f"det_area={s.det_area}", "--option", f"known_litter={s.known_litter}"]
     argv += ["--port", str(port), "--timeout", f"{options.run_timeout:g}"]
     speed = planning_speed_of(task, options)
     if speed is not None:

@@ -21,13 +21,13 @@ import time
 from pathlib import Path
 
 import uvloop
+from cbdi_recycling.maps import load_map
+from cbdi_recycling.world import AgentSpec, World
 
 from cbdi import keys
 from cbdi.bus import BusConfig, LogSink, messages, open_bus
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import ActionRequest, Tick
-from cbdi_world.maps import load_map
-from cbdi_world.world import AgentSpec, World
 
 MAP = Path(__file__).resolve().parents[1] / "domains/recycling/maps/warehouse-15x15.toml"
 BIN = Path(sys.executable).parent
@@ -83,6 +83,8 @@ async def service(epochs: int) -> float:
         world = subprocess.Popen(
             [
                 str(BIN / "cbdi-world"),
+                "--simulator",
+                "recycling",
                 "--map",
                 str(MAP),
                 *agents,

@@ -37,7 +37,7 @@ from cbdi.wire.world import (
     ActionReply,
     ActionRequest,
     EpochAck,
-    LitterView,
+    ItemView,
     Percepts,
     StatsRequest,
     WorldStats,
@@ -80,7 +80,7 @@ def percepts(**kw: object) -> Percepts:
         "depth": 1,
         "free": [(1, 2)],
         "blocked": [],
-        "litter": [],
+        "items": [],
         "holding": [],
     }
     return Percepts(**{**fields, **kw})  # type: ignore[arg-type]
@@ -186,7 +186,7 @@ async def test_the_scheduler_rejects_an_empty_belief_name_and_revises_on_the_nex
             raw(valid, holding=[""]),
             raw(valid, holding=["p1"] * (MAX_ITEMS + 1)),
             raw(valid, time=math.nan),
-            raw(valid, litter=[{"schema": "cbdi.world.LitterView/1", "name": "", "cell": [1, 1]}]),
+            raw(valid, items=[{"schema": "cbdi.world.ItemView/1", "name": "", "cell": [1, 1]}]),
             raw(valid, position=[1]),
             raw(valid, agent="no/such agent"),
         ]
@@ -253,7 +253,7 @@ async def test_the_planner_refuses_nonsense_requests_and_serves_the_next_one() -
 
 
 async def test_the_world_answers_nonsense_requests_with_errors_and_serves_the_next_one() -> None:
-    settings = WorldSettings(map=MAP, agent=("robot1",), wait_agents=0)
+    settings = WorldSettings(map=MAP, simulator="recycling", agent=("robot1",), wait_agents=0)
     shell = TogetherService("world", settings, world_main(build_world(settings), ManualClock()))
     async with alone(shell) as (bus, ctx):
         act = keys.world_rpc("act")
@@ -285,7 +285,7 @@ class Boom(CbdiError):
 
 def test_dropping_reports_a_domain_error_with_schema_sender_and_key_and_goes_on() -> None:
     sink = LogSink()
-    message = percepts(litter=[LitterView(name="p1", cell=(1, 1))])
+    message = percepts(items=[ItemView(name="p1", cell=(1, 1))])
     for error in (ValueError("a belief needs a name"), Boom("no such thing")):
         with dropping(sink, "cbdi/world/percepts/robot1", message):
             raise error

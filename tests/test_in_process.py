@@ -51,6 +51,7 @@ async def run_together(agents: list[str], seed: int) -> RunFinished:
     """Run the paper's map to its end in one process; return the world's last word."""
     members = tuple(f"{a}/{c}" for a in agents for c in ("planner", "scheduler", "executor"))
     settings = WorldSettings(
+        simulator="recycling",
         map=MAP,
         agent=tuple(agents),
         speed=0.0,
@@ -58,8 +59,7 @@ async def run_together(agents: list[str], seed: int) -> RunFinished:
         seed=seed,
         max_time=300.0,
         member=members,
-        people_phase=True,  # as the paper-7x7 scenario
-        people_jitter=1,
+        option=("people_phase=true", "people_jitter=1"),  # as the paper-7x7 scenario
     )
     world = TogetherService("world", settings, world_main(build_world(settings), ManualClock()))
     services = [world, *(s for a in agents for s in agent_services(a))]

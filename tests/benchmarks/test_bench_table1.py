@@ -285,8 +285,8 @@ def test_the_command_scales_the_planning_speed_and_ends_with_the_clock() -> None
     )
     argv = runner.up_argv(model.Task(S813, "offline", 7, 0.25, "realtime"), options, 4242)
     text = " ".join(argv[1:])
-    assert "up paper-7x7 --json --quiet --mode offline --seed 7 --move-step 8" in text
-    assert "--det-area 1 --known-litter 3 --port 4242 --timeout 60" in text
+    assert "up paper-7x7 --json --quiet --mode offline --seed 7 --option move_step=8" in text
+    assert "--option det_area=1 --option known_litter=3 --port 4242 --timeout 60" in text
     assert "--planning-speed 100 --speed 40 --speed 1 --no-lockstep" in text
     plain = runner.up_argv(model.Task(S813, "online", 1), runner.UpOptions(), 1)
     assert "--planning-speed" not in plain and "--no-lockstep" not in plain
@@ -348,11 +348,11 @@ def test_run_all_returns_every_run_sorted_whatever_the_finishing_order() -> None
 
 
 def _world(*flags: str) -> Any:
-    return bounds.launcher_world(["paper-7x7", "--move-step", "4", *flags])
+    return bounds.launcher_world(["paper-7x7", "--option", "move_step=4", *flags])
 
 
 def test_the_clairvoyant_problem_blocks_peoples_cells_while_they_stand_there() -> None:
-    world = _world("--seed", "1", "--no-people-phase", "--people-jitter", "0")
+    world = _world("--seed", "1", "--option", "people_phase=false", "--option", "people_jitter=0")
     timeline = bounds.people_timeline(world, horizon=8)
     assert timeline[:2] == ((0, "person1", (4, 0)), (0, "person2", (6, 3)))
     assert (4, "person1", (3, 0)) in timeline and (8, "person1", (2, 0)) in timeline
@@ -367,7 +367,7 @@ def test_the_clairvoyant_problem_blocks_peoples_cells_while_they_stand_there() -
 
 
 def test_the_clairvoyant_world_is_the_runs_world_seeded_phase_and_jitter_included() -> None:
-    world = _world("--seed", "3", "--people-jitter", "2")
+    world = _world("--seed", "3", "--option", "people_jitter=2")
     assert world.chance.people_phase and world.chance.people_jitter == 2  # the scenario's phase
     assert world.people[0].move_step == 4 and world.seed == 3
     one = bounds.people_timeline(_world("--seed", "1"), horizon=40)

@@ -208,6 +208,8 @@ def test_a_finished_world_stops_after_lingering(tmp_path: Path, router: str, spa
     world = spawn(  # type: ignore[operator]
         "world",
         "cbdi-world",
+        "--simulator",
+        "recycling",
         "--map",
         corridor,
         "--agent",

@@ -41,6 +41,8 @@ async def test_services_survive_garbage_on_every_endpoint(router: str, spawn: ob
     world = spawn(
         "world",
         "cbdi-world",
+        "--simulator",
+        "recycling",
         "--map",
         MAP,
         "--agent",
@@ -50,7 +52,7 @@ async def test_services_survive_garbage_on_every_endpoint(router: str, spawn: ob
         "--no-stop-when-done",
         env=env,
     )
-    agent = spawn("agent", "cbdi-scripted-agent", "--agent", "robot1", "--map", MAP, env=env)  # type: ignore[operator]
+    agent = spawn("agent", "cbdi-scripted-agent", "--agent", "robot1", env=env)  # type: ignore[operator]
     wait_for(
         lambda: "event=ready" in world.output() and "event=ready" in agent.output(),
         what="services ready",

@@ -222,14 +222,14 @@ def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> 
         "paper-7x7",
         "--speed",
         "40",
-        "--move-step",
-        "8",
-        "--det-area",
-        "2",
-        "--known-litter",
-        "2",
-        "--people-jitter",  # the scenario's jitter off: steps exactly every move_step
-        "0",
+        "--option",
+        "move_step=8",
+        "--option",
+        "det_area=2",
+        "--option",
+        "known_litter=2",
+        "--option",  # the scenario's jitter off: steps exactly every move_step
+        "people_jitter=0",
         "--json",
         "--quiet",
         "--record",
@@ -257,9 +257,9 @@ def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> 
     moves_at = [i for i in range(1, len(person1)) if person1[i] != person1[i - 1]]
     assert moves_at[:2] == [8, 16]  # one step every 8 epochs
     # The scenario's people_phase: the world started people where seed 1 puts them.
-    from cbdi_world.chance import Chance
-    from cbdi_world.maps import load_map
-    from cbdi_world.world import AgentSpec, World
+    from cbdi_recycling.chance import Chance
+    from cbdi_recycling.maps import load_map
+    from cbdi_recycling.world import AgentSpec, World
 
     paper = load_map(REPO / "domains/recycling/maps/paper-7x7.toml")
     phased = World(paper, [AgentSpec("robot1", (0, 1))], seed=1, chance=Chance(people_phase=True))

@@ -66,7 +66,7 @@ def test_a_performer_process_carries_out_an_action_the_world_does_not(tmp_path: 
     scenario = tmp_path / "drive.toml"
     scenario.write_text(
         f'name = "drive"\nmap = "{REPO / "domains/recycling/maps/paper-7x7.toml"}"\n'
-        "[run]\nspeed = 2.0\nmax_time = 400.0\n"
+        '[run]\nsimulator = "recycling"\nspeed = 2.0\nmax_time = 400.0\n'
         '[[agents]]\nname = "robot1"\nkind = "bdi"\n'
         f'agent_file = "{tmp_path / "agent.toml"}"\n'
     )

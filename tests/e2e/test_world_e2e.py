@@ -45,6 +45,8 @@ async def test_scripted_agent_recycles_one_item(
     world = spawn(
         "world",
         "cbdi-world",
+        "--simulator",
+        "recycling",
         "--map",
         CORRIDOR,
         "--agent",
@@ -61,8 +63,6 @@ async def test_scripted_agent_recycles_one_item(
         "cbdi-scripted-agent",
         "--agent",
         "robot1",
-        "--map",
-        CORRIDOR,  # type: ignore[operator]
         "--script",
         PATH,
         env=env,
@@ -71,9 +71,18 @@ async def test_scripted_agent_recycles_one_item(
     assert finished.reason == "done"
     assert finished.epoch == 12  # 6 moves of 1 + pickup 3 + recycle 3 epochs
     robot = stats.agents[0]
-    assert (robot.agent, robot.moves, robot.pickups, robot.recycled) == ("robot1", 6, 1, 1)
+    assert (robot.agent, robot.moves, robot.counts["pickups"], robot.counts["recycled"]) == (
+        "robot1",
+        6,
+        1,
+        1,
+    )
     assert (robot.failed, robot.rejected) == (0, 0)
-    assert stats.litter_recycled == 1 and stats.litter_on_ground == 0 and stats.done
+    assert (
+        stats.totals["litter_recycled"] == 1
+        and stats.totals["litter_on_ground"] == 0
+        and stats.done
+    )
     assert info.width == 6 and info.agents == ["robot1"]
     assert world.alive() and agent.alive()  # the world keeps serving after the run
 
@@ -83,6 +92,8 @@ async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -
     world = spawn(
         "world",
         "cbdi-world",
+        "--simulator",
+        "recycling",
         "--map",
         CORRIDOR,
         "--agent",
@@ -100,8 +111,6 @@ async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -
         "cbdi-scripted-agent",
         "--agent",
         "robot1",
-        "--map",
-        CORRIDOR,  # type: ignore[operator]
         "--script",
         "move:1,0",
         "--retries",
@@ -122,7 +131,7 @@ async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -
 def test_broken_map_is_rejected_with_file_field_and_reason(tmp_path: Path, spawn: object) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\ngrid = """\nBA.\n.x.\n"""\n')
-    proc = spawn("world", "cbdi-world", "--map", str(bad))  # type: ignore[operator]
+    proc = spawn("world", "cbdi-world", "--simulator", "recycling", "--map", str(bad))  # type: ignore[operator]
     wait_for(lambda: not proc.alive(), what="world to refuse the map")
     assert proc.popen.returncode == 2
     assert f"{bad}: grid row 1 column 1: unknown cell 'x'" in proc.output()

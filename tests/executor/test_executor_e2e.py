@@ -140,6 +140,8 @@ async def _run(
     world = spawn(
         "world",
         "cbdi-world",
+        "--simulator",
+        "recycling",
         "--map",
         CORRIDOR,
         "--agent",
@@ -174,7 +176,12 @@ async def test_executor_runs_a_plan_in_the_world(router: str, spawn: object) -> 
     seen, _, stats = await _run(router, spawn, corridor_plan())
     assert final(seen) == {f"s{i}": "succeeded" for i in range(1, 9)}
     robot = stats.agents[0]
-    assert (robot.moves, robot.pickups, robot.recycled, robot.failed) == (6, 1, 1, 0)
+    assert (robot.moves, robot.counts["pickups"], robot.counts["recycled"], robot.failed) == (
+        6,
+        1,
+        1,
+        0,
+    )
     starts: dict[str, float] = {}
     for st in seen:
         if st.status == "running":
@@ -193,7 +200,7 @@ async def test_inapplicable_step_is_refused_before_dispatch(router: str, spawn: 
     assert states["s3"] == "succeeded" and states["s4"] == "refused"
     refusal = next(st for st in seen if st.step_id == "s4" and st.status == "refused")
     assert "(litter_pose plastic_4_1 c_5_1) does not hold" in refusal.reason
-    assert stats.agents[0].pickups == 0  # nothing was sent to the world
+    assert stats.agents[0].counts["pickups"] == 0  # nothing was sent to the world
 
 
 async def test_early_arrest_stops_after_the_running_step(router: str, spawn: object) -> None:

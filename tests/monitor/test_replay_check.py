@@ -69,9 +69,9 @@ def test_a_percept_without_its_litter_changes_the_beliefs_of_that_epoch(
     recording: Path, tmp_path: Path
 ) -> None:
     def drop_litter(key: str, msg: dict[str, Any]) -> bool:
-        if key != "cbdi/world/percepts/robot1" or msg["epoch"] < 20 or not msg["litter"]:
+        if key != "cbdi/world/percepts/robot1" or msg["epoch"] < 20 or not msg["items"]:
             return False
-        msg["gone"] = msg["litter"].pop(0)["name"]
+        msg["gone"] = msg["items"].pop(0)["name"]
         return True
 
     changed = altered(recording, tmp_path / "litter.mcap", drop_litter)

@@ -60,6 +60,8 @@ async def test_agent_pursues_its_desire_to_the_end(
     world = spawn(
         "world",
         "cbdi-world",
+        "--simulator",
+        "recycling",
         "--map",
         CORRIDOR,
         "--agent",
@@ -99,7 +101,7 @@ async def test_agent_pursues_its_desire_to_the_end(
         recycle = [s for s in seen if s[0] == "recycle"]  # make_way comes and goes too
         assert recycle[:2] == [("recycle", "added"), ("recycle", "activated")]
         stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats)
-        assert stats.litter_recycled == 1 and stats.agents[0].moves == 6
+        assert stats.totals["litter_recycled"] == 1 and stats.agents[0].moves == 6
     finally:
         await bus.close()
     await asyncio.sleep(0.3)

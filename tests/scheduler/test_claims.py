@@ -9,7 +9,7 @@ from cbdi_recycling.events import UNKNOWN_DISTANCE, distance
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
-from cbdi.wire.world import LitterView, Percepts
+from cbdi.wire.world import ItemView, Percepts
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.mind import Mind, Reaction
@@ -27,7 +27,7 @@ def seen(agent: str, epoch: int, *litter: tuple[str, tuple[int, int]]) -> Percep
         free=[(1, 1)],
         blocked=[(0, 0)],
         holding=[],
-        litter=[LitterView(name=n, cell=c) for n, c in litter],
+        items=[ItemView(name=n, cell=c) for n, c in litter],
     )
 
 
@@ -164,9 +164,9 @@ def test_distances_on_the_30x30_campus_are_shortest_paths_and_fast() -> None:
     import time
 
     from cbdi_recycling.events import Distances, map_beliefs
+    from cbdi_recycling.maps import load_map
 
     from cbdi.wire.world import BinView, WorldInfo
-    from cbdi_world.maps import load_map
 
     root = Path(__file__).resolve().parents[2]
     m = load_map(root / "domains/recycling/maps/campus-30x30.toml")

@@ -7,7 +7,7 @@ from cbdi_recycling.events import exploration_target, map_beliefs
 from cbdi_recycling.knowledge import EXPLORE_AFTER, RecyclingKnowledge
 
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.world import BinView, LitterView, Percepts, WorldInfo
+from cbdi.wire.world import BinView, ItemView, Percepts, WorldInfo
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
 from tests_support import REPO
@@ -41,7 +41,7 @@ def seen(time: float, at: tuple[int, int], free: list[tuple[int, int]]) -> Perce
         free=free,
         blocked=[],
         holding=[],
-        litter=[],
+        items=[],
     )
 
 
@@ -80,7 +80,7 @@ def test_exploring_stops_when_the_robot_picks_something_up() -> None:
         free=[],
         blocked=[],
         holding=["pla1"],
-        litter=[],
+        items=[],
     )
     assert targets(k.on_percepts(beliefs, holding)) == []
 
@@ -107,7 +107,7 @@ def test_an_idle_robot_explores_and_recycling_comes_first() -> None:
         free=[(1, 0), (0, 1)],
         blocked=[],
         holding=[],
-        litter=[LitterView(name="pla1", cell=(0, 1))],
+        items=[ItemView(name="pla1", cell=(0, 1))],
     )
     out = mind.on_percepts(spotted)
     assert ("recycle", "activated") in [(e.desire, e.event) for e in out.events]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from cbdi.beliefs import fact, instance
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
-from cbdi.wire.world import ActionOutcome, LitterView, Percepts
+from cbdi.wire.world import ActionOutcome, ItemView, Percepts
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
 
@@ -30,7 +30,7 @@ def percepts(
         free=list(free),
         blocked=[(0, 0)],
         holding=list(holding),
-        litter=[LitterView(name=n, cell=c) for n, c in litter],
+        items=[ItemView(name=n, cell=c) for n, c in litter],
     )
 
 
@@ -266,7 +266,7 @@ def test_an_idle_robot_on_its_way_home_past_a_bin_is_not_turned_back() -> None:
         free=[(2, 0), (3, 0), (4, 0), (5, 0)],  # all sensed: nothing to explore
         blocked=[(0, 0)],
         holding=[],
-        litter=[],
+        items=[],
     )
     out = mind.on_percepts(seen)
     assert {"make_way", "go_home"} <= set(mind.desires)

@@ -7,7 +7,7 @@ from cbdi_recycling.events import revise_from_percepts
 from msgspec.structs import replace
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import LitterView, Percepts
+from cbdi.wire.world import ItemView, Percepts
 from cbdi_scheduler.conditions import Literal, bindings, holds
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect, fire_rules
@@ -176,7 +176,7 @@ def test_percepts_revise_the_sensed_square_only() -> None:
         free=[(1, 0), (0, 2)],
         blocked=[(0, 0), (1, 1), (1, 2)],
         holding=["pla9"],
-        litter=[LitterView(name="new", cell=(0, 2), known=False)],
+        items=[ItemView(name="new", cell=(0, 2), known=False)],
     )
     after = revise_from_percepts(before, p)
     assert after.holds(fact("free", "c_1_0")) and after.holds(fact("free", "c_0_2"))
@@ -205,7 +205,7 @@ def test_an_obstacle_out_of_sight_is_forgotten_but_bins_stay() -> None:
         free=[],
         blocked=[(1, 0)],  # a person next to the robot
         holding=[],
-        litter=[],
+        items=[],
     )
     after = revise_from_percepts(before, seen)
     assert not after.holds(fact("free", "c_1_0"))
@@ -259,7 +259,7 @@ def test_an_obstacle_out_of_sight_is_remembered_for_a_while() -> None:
         free=[],
         blocked=[(1, 0)],
         holding=[],
-        litter=[],
+        items=[],
     )
     memory = seen_blocked({}, seen)
     after = revise_from_percepts(before, seen, blocked=memory)

@@ -14,11 +14,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.maps import load_map
 
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import load_scenario
 from cbdi_scheduler.agentfile import load_agent
-from cbdi_world.maps import load_map
 
 REPO = Path(__file__).resolve().parents[2]
 MAP = REPO / "domains/recycling/maps/paper-7x7.toml"
@@ -30,7 +30,8 @@ CBDI = Path(sys.executable).parent / "cbdi"
 
 def scenario(tmp_path: Path, run: str) -> Path:
     path = tmp_path / "s.toml"
-    path.write_text(f'name = "s"\nmap = "{MAP}"\n[run]\n{run}\n[[agents]]\nname = "robot1"\n')
+    head = f'name = "s"\nmap = "{MAP}"\n[run]\nsimulator = "recycling"\n'
+    path.write_text(f'{head}{run}\n[[agents]]\nname = "robot1"\n')
     return path
 
 
@@ -70,7 +71,7 @@ def test_a_file_that_is_not_utf8_is_named(kind: str, tmp_path: Path) -> None:
         ("speed = nan", "run.speed"),
         ("seed = true", "run.seed"),
         ("seed = -3", "run.seed"),
-        ("spawn = 2.0", "run.spawn"),
+        ("[world]\nspawn = 2.0", "world.spawn"),
         ("planning_speed = -inf", "run.planning_speed"),
         ("lockstep = 1", "run.lockstep"),
     ],
@@ -78,6 +79,19 @@ def test_a_file_that_is_not_utf8_is_named(kind: str, tmp_path: Path) -> None:
 def test_scenario_values_out_of_range_name_the_field(tmp_path: Path, run: str, field: str) -> None:
     path = scenario(tmp_path, run)
     with pytest.raises(CbdiError, match=f"{path}: {field}: "):
+        load_scenario(path)
+
+
+def test_a_simulator_that_is_not_installed_is_named_with_those_that_are(tmp_path: Path) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(
+        f'name = "s"\nmap = "{MAP}"\n[run]\nsimulator = "warehouse"\n[[agents]]\nname = "robot1"\n'
+    )
+    with pytest.raises(
+        CbdiError,
+        match=r"run.simulator: simulator: no simulator 'warehouse' "
+        r"\(installed: courier, recycling\)",
+    ):
         load_scenario(path)
 
 
@@ -186,7 +200,8 @@ def test_a_domain_action_nobody_performs_stops_cbdi_up_before_it_starts(tmp_path
         (tmp_path / "agent.toml").write_text(performers + text)
         path = tmp_path / "s.toml"
         path.write_text(
-            f'name = "s"\nmap = "{MAP}"\n[[agents]]\nname = "robot1"\nkind = "bdi"\n'
+            f'name = "s"\nmap = "{MAP}"\n[run]\nsimulator = "recycling"\n'
+            '[[agents]]\nname = "robot1"\nkind = "bdi"\n'
             f'agent_file = "{tmp_path / "agent.toml"}"\n'
         )
         if performers:

@@ -72,7 +72,7 @@ async def test_the_world_is_released_up_to_the_agents_percepts() -> None:
         depth=1,
         free=[],
         blocked=[],
-        litter=[],
+        items=[],
         holding=[],
     )
     await gate.put(item("cbdi/world/clock", 1, 1, tick))

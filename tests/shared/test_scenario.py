@@ -1,17 +1,18 @@
-"""Scenario `[run]` keys and `cbdi up` flags of the world's chances reach `cbdi-world`."""
+"""A scenario's `[world]` options and `cbdi up --option` reach the simulator `cbdi-world`
+hosts (the recycling grid's chances here), checked by what the simulator declares."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.chance import Chance
 
 from cbdi.errors import ConfigError
 from cbdi.launcher import cli
 from cbdi.launcher.run import _specs
 from cbdi.launcher.scenario import find_scenario, load_scenario
 from cbdi.runtime import load_config
-from cbdi_world.chance import Chance
 from cbdi_world.service import WorldSettings, build_world
 
 REPO = Path(__file__).resolve().parents[2]
@@ -20,7 +21,8 @@ MAP = REPO / "domains" / "recycling" / "maps" / "paper-7x7.toml"
 
 def scenario_file(tmp_path: Path, run: str) -> Path:
     path = tmp_path / "s.toml"
-    path.write_text(f'name = "s"\nmap = "{MAP}"\n[run]\n{run}\n[[agents]]\nname = "robot1"\n')
+    head = f'name = "s"\nmap = "{MAP}"\n[run]\nsimulator = "recycling"\n[world]\n'
+    path.write_text(f'{head}{run}\n[[agents]]\nname = "robot1"\n')
     return path
 
 
@@ -33,15 +35,14 @@ def world_of(argv: list[str]) -> Chance:
 
 
 def test_the_paper_scenario_samples_a_phase_and_a_jitter_of_its_people() -> None:
-    run = load_scenario(find_scenario("paper-7x7")).run
-    assert (run.people_phase, run.people_jitter) == (True, 1)
-    assert (run.duration_noise, run.failure_probability) == (0.0, 0.0)
+    scenario = load_scenario(find_scenario("paper-7x7"))
+    assert scenario.options == {"people_phase": True, "people_jitter": 1}
     assert world_of(["paper-7x7"]) == Chance(people_phase=True, people_jitter=1)
 
 
 def test_flags_override_the_scenario_and_reach_the_world() -> None:
-    argv = ["paper-7x7", "--no-people-phase", "--people-jitter", "3"]
-    argv += ["--duration-noise", "0.25", "--failure-probability", "0.1"]
+    argv = ["paper-7x7", "--option", "people_phase=false", "--option", "people-jitter=3"]
+    argv += ["--option", "duration_noise=0.25", "--option", "failure_probability=0.1"]
     assert world_of(argv) == Chance(
         people_phase=False, people_jitter=3, duration_noise=0.25, failure_probability=0.1
     )
@@ -51,14 +52,15 @@ def test_flags_override_the_scenario_and_reach_the_world() -> None:
 @pytest.mark.parametrize(
     ("run", "field"),
     [
-        ("people_jitter = -1", "run.people_jitter"),
-        ("people_jitter = true", "run.people_jitter"),
-        ("people_jitter = 1.5", "run.people_jitter"),
-        ("duration_noise = 11", "run.duration_noise"),
-        ("duration_noise = nan", "run.duration_noise"),
-        ("failure_probability = 1.0", "run.failure_probability"),
-        ("failure_probability = inf", "run.failure_probability"),
-        ("people_phase = 1", "run.people_phase"),
+        ("people_jitter = -1", "world.people_jitter"),
+        ("people_jitter = true", "world.people_jitter"),
+        ("people_jitter = 1.5", "world.people_jitter"),
+        ("duration_noise = 11", "world.duration_noise"),
+        ("duration_noise = nan", "world.duration_noise"),
+        ("failure_probability = 1.0", "world.failure_probability"),
+        ("failure_probability = inf", "world.failure_probability"),
+        ("people_phase = 1", "world.people_phase"),
+        ("peoples_phase = true", "world.peoples_phase"),
     ],
 )
 def test_bad_run_values_name_the_key(tmp_path: Path, run: str, field: str) -> None:
@@ -70,17 +72,31 @@ def test_bad_run_values_name_the_key(tmp_path: Path, run: str, field: str) -> No
 @pytest.mark.parametrize(
     "flags",
     [
-        ["--people-jitter", "-1"],
-        ["--duration-noise", "-0.5"],
-        ["--duration-noise", "nan"],
-        ["--failure-probability", "1"],
+        "people_jitter=-1",
+        "duration_noise=-0.5",
+        "duration_noise=nan",
+        "failure_probability=1",
+        "people_phase=maybe",
     ],
 )
-def test_bad_flags_exit_2_naming_the_flag(flags: list[str], capsys: pytest.CaptureFixture) -> None:
-    assert cli.main(["paper-7x7", *flags]) == cli.EXIT_USAGE
-    assert f"cbdi up: {flags[0]}: {flags[0][2:].replace('-', '_')}: expected" in (
-        capsys.readouterr().err
-    )
+def test_bad_options_exit_2_naming_the_option(flags: str, capsys: pytest.CaptureFixture) -> None:
+    assert cli.main(["paper-7x7", "--option", flags]) == cli.EXIT_USAGE
+    assert f"cbdi up: --option: {flags.split('=')[0]}: expected" in capsys.readouterr().err
+
+
+def test_an_unknown_option_is_refused_with_the_known_ones(capsys: pytest.CaptureFixture) -> None:
+    assert cli.main(["paper-7x7", "--option", "move_stp=4"]) == cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "--option: move_stp: unknown option of GridWorld" in err and "move_step" in err
+    assert cli.main(["courier", "--option", "move_step=4"]) == cli.EXIT_USAGE
+    assert "unknown option of CourierSimulator (it has: none)" in capsys.readouterr().err
+
+
+def test_a_scenario_without_a_simulator_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(f'name = "s"\nmap = "{MAP}"\n[run]\n[[agents]]\nname = "robot1"\n')
+    with pytest.raises(ConfigError, match=r"run\.simulator: missing"):
+        load_scenario(path)
 
 
 def test_each_service_is_told_its_args_and_the_launcher_records_them() -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from cbdi.view import Intentions, render
 from cbdi.wire.agent import DesireEvent
-from cbdi.wire.world import AgentView, BinView, LitterView, PersonView, WorldInfo, WorldSnapshot
+from cbdi.wire.world import AgentView, BinView, ItemView, PersonView, WorldInfo, WorldSnapshot
 
 
 def event(what: str, desire: str = "recycle", goal: tuple[str, ...] = ("p1",)) -> DesireEvent:
@@ -36,8 +36,8 @@ def test_the_view_shows_the_grid_and_what_each_agent_intends() -> None:
         time=4.0,
         agents=[AgentView(name="robot1", cell=(1, 1), pose=(1.0, 1.0), holding=["p2"])],
         people=[PersonView(name="p", cell=(0, 1), pose=(0.0, 1.0))],
-        litter=[LitterView(name="p1", cell=(1, 0), known=True)],
-        recycled=[],
+        items=[ItemView(name="p1", cell=(1, 0), known=True)],
+        completed=[],
     )
     intentions = Intentions()
     intentions.on_event(event("activated"))

@@ -30,14 +30,15 @@ _AGENT_MARKS = string.digits[1:] + string.ascii_uppercase
 
 
 def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | None = None) -> str:
-    """Draw the grid: `#` wall, `B` bin, `@` person, `*` litter, 1-9/A-Z robots; then what
-    each agent intends (`intents`: agent -> text), if known."""
+    """Draw the grid: `#` wall, `B` bin, `@` person (a moving obstacle), `*` an item
+    known from the start, `+` one found, 1-9/A-Z robots; then what each agent intends
+    (`intents`: agent -> text), if known."""
     grid = [["." for _ in range(info.width)] for _ in range(info.height)]
     for x, y in info.walls:
         grid[y][x] = "#"
     for b in info.bins:
         grid[b.cell[1]][b.cell[0]] = "B"
-    for item in snap.litter:
+    for item in snap.items:
         grid[item.cell[1]][item.cell[0]] = "*" if item.known else "+"
     for p in snap.people:
         grid[p.cell[1]][p.cell[0]] = "@"
@@ -49,8 +50,8 @@ def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | No
         doing = f" {a.action}" if a.action else ""
         legend.append(f"{mark}={a.name}{load}{doing}")
     header = (
-        f"epoch {snap.epoch}  t={snap.time:.1f}  litter on ground {len(snap.litter)}"
-        f"  recycled {len(snap.recycled)}"
+        f"epoch {snap.epoch}  t={snap.time:.1f}  items on the map {len(snap.items)}"
+        f"  completed {len(snap.completed)}"
     )
     rows = [" ".join(row) for row in grid]
     intending = [f"{a}: {text}" for a, text in sorted((intents or {}).items())]

@@ -24,7 +24,7 @@ from cbdi.wire.world import (
     ActionRequest,
     AgentStats,
     AgentView,
-    LitterView,
+    ItemView,
     OutcomeStatus,
     PersonView,
     Sensed,
@@ -191,7 +191,6 @@ class CourierSimulator:
             AgentStats(
                 agent=n,
                 moves=self.robots[n].counts.get("drive", 0),
-                pickups=self.robots[n].counts.get("grab", 0),
                 failed=self.robots[n].counts.get("failed", 0),
                 rejected=self.robots[n].counts.get("rejected", 0),
                 busy=round(self.robots[n].busy, 9),
@@ -409,12 +408,12 @@ class CourierSimulator:
             PersonView(name=c.name, cell=c.cell, pose=(float(c.cell[0]), float(c.cell[1])))
             for c in self.carts
         ]
-        parcels = [LitterView(name=p, cell=c) for p, c in self.parcels.items()]
+        parcels = [ItemView(name=p, cell=c) for p, c in self.parcels.items()]
         return WorldSnapshot(
             epoch=self.epoch,
             time=self.time,
             agents=agents,
             people=carts,
-            litter=parcels,
-            recycled=list(self.delivered),
+            items=parcels,
+            completed=list(self.delivered),
         )

@@ -86,7 +86,7 @@ def revise_from_percepts(
     unseen -= set(blocked)
     fresh += [fact("free", c) for c in sorted(unseen) if ("free", c) not in beliefs.facts]
     fresh.append(fact("in", me, cell_name(p.position)))
-    for item in p.litter:
+    for item in p.items:
         fresh += [
             instance(item.name, litter_type),
             fact("litter_pose", item.name, cell_name(item.cell)),
@@ -132,7 +132,7 @@ def map_beliefs(
             out.append(fact("near", cell_name(c), cell_name(n)))
     for cell, name in bins.items():
         out += [instance(name, bin_type), fact("bin_pose", name, cell_name(cell))]
-    for item in info.known_litter:  # the paper's known litter, given at the start
+    for item in info.known_items:  # the paper's known litter, given at the start
         out += [
             instance(item.name, litter_type),
             fact("litter_pose", item.name, cell_name((item.cell[0], item.cell[1]))),

@@ -157,8 +157,9 @@ def _outcome(agent: AgentReport, o: ActionOutcome) -> None:
 
 
 def _stats_dict(a: Any) -> dict[str, int]:
-    fields = ("moves", "pickups", "recycled", "blocked", "failed", "rejected", "contacts")
-    return {k: getattr(a, k) for k in fields}
+    """One agent's world counters: the generic ones, then the simulator's own."""
+    fields = ("moves", "blocked", "failed", "rejected", "contacts")
+    return {**{k: getattr(a, k) for k in fields}, **a.counts}
 
 
 def render(report: Inspection) -> str:

@@ -2,7 +2,7 @@
 
 Entity layout (what a user sees in the viewer):
 
-- `world/map/walls`, `world/map/bins` (static boxes), `world/people`, `world/litter`
+- `world/map/walls`, `world/map/bins` (static boxes), `world/people`, `world/items`
 - `world/robots` (points labelled with names), `agents/<name>/intent` (the requested move)
 - `agents/<name>/log` (text log: requests, outcomes, desires, search requests, plans and
   replans with their purpose, failure forecasts, search fall-backs, step statuses, early
@@ -196,11 +196,12 @@ class RerunLogger:
             ),
         )
         self.log(
-            "world/litter",
+            "world/items",
             rr.Points2D(
-                [(i.cell[0] + 0.5, i.cell[1] + 0.5) for i in snap.litter],
+                [(i.cell[0] + 0.5, i.cell[1] + 0.5) for i in snap.items],
                 radii=0.15,
-                colors=[(120, 70, 20) if i.known else (200, 120, 60) for i in snap.litter],
+                colors=[(120, 70, 20) if i.known else (200, 120, 60) for i in snap.items],
+                labels=[i.name for i in snap.items],
             ),
         )
 
@@ -230,8 +231,9 @@ class RerunLogger:
     def on_stats(self, m: RecordedMessage) -> None:
         rr, stats = self.rr, decode(m.payload, WorldStats, m.key)
         for a in stats.agents:
-            for name in ("moves", "recycled", "failed", "blocked"):
-                self.log(f"plots/{a.agent}/{name}", rr.Scalars(getattr(a, name)))
+            counters = {"moves": a.moves, "failed": a.failed, "blocked": a.blocked, **a.counts}
+            for name, value in counters.items():  # the generic ones, then the simulator's
+                self.log(f"plots/{a.agent}/{name}", rr.Scalars(value))
 
     def on_alive(self, m: RecordedMessage) -> None:
         rr, event = self.rr, decode(m.payload, Liveliness, m.key)

@@ -1,24 +1,11 @@
-"""cbdi world service: the shared recycling world of the paper, for any number of robots.
+"""cbdi world service: hosts a domain's simulator for any number of robots.
 
-The pure core (`maps`, `rules`, `chance`, `world`, `physics`) knows nothing of the bus; `service`
-puts it on the bus; `scripted` is a scripted robot for demos and end-to-end tests.
+`service` puts a simulator (entry point `cbdi.simulators`, see `cbdi.simulator`) on the
+bus: the epoch clock and its pace, lockstep acknowledgements (`acks`), the request trace
+(`trace`) and the end of the run. The recycling grid world is one such simulator, in the
+`cbdi-recycling` package.
 """
 
-from cbdi_world.chance import Chance
-from cbdi_world.errors import MapError, UnknownAgentError, WorldError
-from cbdi_world.maps import PersonSpec, WorldMap, load_map, parse_map
-from cbdi_world.world import AgentSpec, EpochResult, World
+from cbdi_world.errors import UnknownAgentError, WorldError
 
-__all__ = [
-    "AgentSpec",
-    "Chance",
-    "EpochResult",
-    "MapError",
-    "PersonSpec",
-    "UnknownAgentError",
-    "World",
-    "WorldError",
-    "WorldMap",
-    "load_map",
-    "parse_map",
-]
+__all__ = ["UnknownAgentError", "WorldError"]

@@ -1,4 +1,4 @@
-"""`cbdi-world` (also `cbdi world`): run the shared world service."""
+"""`cbdi-world` (also `cbdi world`): run the shared world service, hosting a simulator."""
 
 from __future__ import annotations
 
@@ -21,7 +21,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             argv,
             prog="cbdi-world",
             section="world",
-            description="The shared recycling world: grid, walls, bins, litter, people and robots.",
+            description="The shared world: hosts a domain's simulator (--simulator NAME, entry "
+            "point cbdi.simulators) for every robot: clock, lockstep, percepts, snapshots.",
         )
         world = build_world(settings)
     except (ConfigError, WorldError) as exc:

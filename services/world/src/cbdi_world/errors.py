@@ -4,25 +4,13 @@ from __future__ import annotations
 
 from cbdi.errors import CbdiError
 
-__all__ = ["MapError", "UnknownAgentError", "WorldError"]
+__all__ = ["UnknownAgentError", "WorldError"]
 
 
 class WorldError(CbdiError):
-    """Base class of world errors (bad agents list, impossible setup)."""
+    """Base class of the host's errors (bad agents list, settings, a simulator refused)."""
 
     code = "world_error"
-
-
-class MapError(WorldError):
-    """Reject a map file, naming the file, the field and the reason."""
-
-    code = "bad_map"
-
-    def __init__(self, path: str, field: str, reason: str) -> None:
-        self.path = path
-        self.field = field
-        self.reason = reason
-        super().__init__(f"{path}: {field}: {reason}")
 
 
 class UnknownAgentError(WorldError):

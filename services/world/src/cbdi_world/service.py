@@ -1,6 +1,6 @@
-"""The world service: the pure `World` core behind the bus.
+"""The world service: a domain's pure simulator (`cbdi.simulator`) behind the bus.
 
-Every epoch it steps the world and publishes the tick, action outcomes, each agent's
+Every epoch it steps the simulator and publishes the tick, action outcomes, each agent's
 percepts, a snapshot and (periodically) statistics. Requests (`act`, `stats`, `info`) are
 answered at once on the same event loop, so they never race with a step. Pacing comes
 from the injected clock: `speed` simulated seconds per wall second, or as fast as possible
@@ -21,10 +21,16 @@ from cbdi.bus import messages, publish, serve
 from cbdi.bus.typed import dropping
 from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
-from cbdi.plugins import load_binding
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
-from cbdi.simulator import EpochResult, Simulator, SimulatorConfig, load_simulator
+from cbdi.simulator import (
+    EpochResult,
+    Simulator,
+    SimulatorConfig,
+    load_simulator,
+    parse_option_pairs,
+    read_options,
+)
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply, RunFinished
 from cbdi.wire.world import (
@@ -37,13 +43,10 @@ from cbdi.wire.world import (
     WorldInfoRequest,
 )
 from cbdi_world.acks import AckTracker, members_of
-from cbdi_world.chance import Chance
 from cbdi_world.errors import UnknownAgentError, WorldError
-from cbdi_world.maps import load_map, with_situation
 from cbdi_world.trace import RequestTrace
-from cbdi_world.world import AgentSpec, World
 
-__all__ = ["WorldService", "WorldSettings", "agent_specs", "build_world", "world_main"]
+__all__ = ["WorldService", "WorldSettings", "agent_entries", "build_world", "world_main"]
 
 
 @dataclass(frozen=True)
@@ -55,11 +58,11 @@ class WorldSettings(ServiceSettings):
         default=(), metadata={"help": "agent NAME or NAME:DEPTH, placed on the map's start cells"}
     )
     speed: float = field(default=1.0, metadata={"help": "simulated s per wall s; 0 = flat out"})
-    seed: int = field(
-        default=0, metadata={"help": "seed of the random litter and of the options below"}
-    )
+    seed: int = field(default=0, metadata={"help": "seed of the simulator's random generators"})
     max_time: float = field(default=0.0, metadata={"help": "end the run at this simulated time"})
-    stop_when_done: bool = field(default=True, metadata={"help": "end when all litter recycled"})
+    stop_when_done: bool = field(
+        default=True, metadata={"help": "end when the simulator's goals are all met"}
+    )
     linger: float = field(
         default=0.0,
         metadata={
@@ -80,58 +83,14 @@ class WorldSettings(ServiceSettings):
         default=120.0, metadata={"help": "lockstep: seconds to wait for a member's ack"}
     )
     stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
-    move_step: int = field(default=0, metadata={"help": "people step every N epochs (0: map's)"})
-    det_area: int = field(default=-1, metadata={"help": "agents' detection depth (-1: map's)"})
-    known_litter: int = field(
-        default=-1, metadata={"help": "litter items known at start, first in reading order"}
-    )
-    spawn: float = field(
-        default=-1.0, metadata={"help": "probability of new litter per epoch (-1: map's)"}
-    )
-    people_phase: bool = field(
-        default=False, metadata={"help": "people start at a seeded cell of their loop"}
-    )
-    people_jitter: int = field(
-        default=0, metadata={"help": "people step up to N epochs early or late (seeded)"}
-    )
-    duration_noise: float = field(
-        default=0.0,
-        metadata={"help": "stretch actions by a seeded 0..F of their duration (whole epochs)"},
-    )
-    failure_probability: float = field(
-        default=0.0, metadata={"help": "chance that an accepted action fails at its end"}
-    )
-    binding: str = field(
-        default="recycling",
-        metadata={"help": "how PDDL actions map to the world's (entry point cbdi.bindings)"},
-    )
     simulator: str = field(
         default="",
-        metadata={
-            "help": "host this domain simulator (entry point cbdi.simulators) instead of the "
-            "grid world; the grid world's options above do not apply to it"
-        },
+        metadata={"help": "the domain's simulator to host (entry point cbdi.simulators)"},
     )
-
-
-def agent_specs(
-    entries: Sequence[str], starts: Sequence[tuple[int, int]], depth: int
-) -> list[AgentSpec]:
-    """Place agents `NAME[:DEPTH]` on the map's start cells, in order."""
-    specs: list[AgentSpec] = []
-    if len(entries) > len(starts):
-        raise WorldError(f"{len(entries)} agents but the map has only {len(starts)} start cells")
-    for entry, start in zip(entries, starts, strict=False):
-        name, _, d = entry.partition(":")
-        try:
-            keys.validate_name(name)
-            agent_depth = int(d) if d else depth
-        except ValueError as exc:
-            raise WorldError(f"--agent {entry!r}: {exc}") from None
-        specs.append(AgentSpec(name=name, start=start, detection_depth=agent_depth))
-    if len({s.name for s in specs}) != len(specs):
-        raise WorldError("agent names must be unique")
-    return specs
+    option: tuple[str, ...] = field(
+        default=(),
+        metadata={"help": "a simulator option KEY=VALUE (what it declares: its Options)"},
+    )
 
 
 class WorldService:
@@ -151,10 +110,7 @@ class WorldService:
         self.agents = [a for a in world.info().agents]
         self.members = members_of(settings.member, self.agents)
         self.acks = AckTracker(self.members)
-        # The grid world performs PDDL actions through its domain's binding; a hosted
-        # simulator performs them itself.
-        self.binding = None if settings.simulator else load_binding(settings.binding, "--binding")
-        actions = self.binding.actions if self.binding else getattr(type(world), "actions", ())
+        actions = getattr(world, "actions", ())  # the PDDL actions the simulator performs
         self.info = replace(
             world.info(),
             members=list(self.members),
@@ -186,13 +142,12 @@ class WorldService:
         try:
             if req.agent not in self.agents:
                 raise UnknownAgentError(req.agent)
-            bound = self.binding.primitive(req) if self.binding and req.args else req
-            reply = self.world.request(bound)
+            reply = self.world.request(req)
         except UnknownAgentError as exc:
             self.ctx.counters["unknown_agent"] += 1
             self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
             return ErrorReply(code="unknown_agent", message=str(exc))
-        except CbdiError as exc:  # a PDDL action this world does not perform
+        except CbdiError as exc:  # an action (or arguments) the simulator does not perform
             reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
         self.trace.record(self.world.epoch, req, reply)
         self.ctx.log.info(
@@ -315,54 +270,45 @@ class WorldService:
 
 
 def build_world(settings: WorldSettings) -> Simulator:
-    """Load the map and place the agents (the grid world, or the `--simulator`); raise a
-    CbdiError/WorldError naming what is wrong."""
+    """Build the `--simulator` from its map, agents, seed and options; raise a
+    CbdiError/WorldError naming what is wrong (a map it refuses names the simulator)."""
     if not settings.map:
         raise WorldError("no map given (--map FILE)")
     if not (math.isfinite(settings.linger) and settings.linger >= 0):
         raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
-    if settings.simulator:
-        return host_simulator(settings)
-    load_binding(settings.binding, "--binding")  # a name not installed: said at start
-    world_map = with_situation(
-        load_map(settings.map),
-        move_step=settings.move_step,
-        detection_depth=settings.det_area,
-        known_litter=settings.known_litter,
-        spawn_probability=settings.spawn,
-    )
-    agents = settings.agent or ("robot1",)
-    specs = agent_specs(agents, world_map.agent_starts, world_map.detection_depth)
-    members_of(settings.member, [s.name for s in specs])  # every member names an agent
-    chance = Chance(
-        people_phase=settings.people_phase,
-        people_jitter=settings.people_jitter,
-        duration_noise=settings.duration_noise,
-        failure_probability=settings.failure_probability,
-    )
-    return World(world_map, specs, seed=settings.seed, chance=chance)
-
-
-def host_simulator(settings: WorldSettings) -> Simulator:
-    """Build the `--simulator` from its map, agents and seed; a map it refuses is a
-    WorldError naming the simulator (never a traceback)."""
     simulator = load_simulator(settings.simulator, "--simulator")
-    agents = tuple(a.partition(":")[0] for a in settings.agent or ("robot1",))
-    for name in agents:
-        try:
-            keys.validate_name(name)
-        except ValueError as exc:
-            raise WorldError(f"--agent {name!r}: {exc}") from None
-    if len(set(agents)) != len(agents):
-        raise WorldError("agent names must be unique")
-    members_of(settings.member, list(agents))
-    config = SimulatorConfig(map=settings.map, agents=agents, seed=settings.seed)
+    options = read_options(simulator, parse_option_pairs(settings.option, "--option"), "--option")
+    agents, depths = agent_entries(settings.agent or ("robot1",))
+    members_of(settings.member, list(agents))  # every member names an agent
+    config = SimulatorConfig(
+        map=settings.map, agents=agents, seed=settings.seed, detection_depth=depths, options=options
+    )
     try:
         return simulator(config)
     except CbdiError:
         raise
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise WorldError(f"simulator {settings.simulator!r}, map {settings.map}: {exc}") from None
+
+
+def agent_entries(entries: Sequence[str]) -> tuple[tuple[str, ...], dict[str, int]]:
+    """Read `--agent NAME[:DEPTH]` entries: the names in order, and the depths given."""
+    names: list[str] = []
+    depths: dict[str, int] = {}
+    for entry in entries:
+        name, _, depth = entry.partition(":")
+        try:
+            keys.validate_name(name)
+            if depth:
+                depths[name] = int(depth)
+                if depths[name] < 0:
+                    raise ValueError(f"a detection depth is >= 0, not {depth}")
+        except ValueError as exc:
+            raise WorldError(f"--agent {entry!r}: {exc}") from None
+        names.append(name)
+    if len(set(names)) != len(names):
+        raise WorldError("agent names must be unique")
+    return tuple(names), depths
 
 
 def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
@@ -378,10 +324,8 @@ def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
             speed=settings.speed,
             lockstep=settings.lockstep,
             seed=settings.seed,
-            people_phase=settings.people_phase,
-            people_jitter=settings.people_jitter,
-            duration_noise=settings.duration_noise,
-            failure_probability=settings.failure_probability,
+            simulator=settings.simulator,
+            options=",".join(settings.option),
         )
         WorldService(ctx, world, settings, clock).start()
 

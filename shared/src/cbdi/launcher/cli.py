@@ -19,7 +19,7 @@ from cbdi.launcher.run import LaunchOptions, RunSummary, launch
 from cbdi.launcher.scenario import (
     AGENT_KINDS,
     Scenario,
-    check_chance,
+    check_performed,
     check_ranges,
     check_until,
     find_scenario,
@@ -27,6 +27,7 @@ from cbdi.launcher.scenario import (
     performer_actions,
 )
 from cbdi.launcher.watch import TICK
+from cbdi.simulator import load_simulator, parse_option_pairs, read_options
 
 __all__ = ["main", "scenario_arguments", "scenario_from_args"]
 
@@ -39,7 +40,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="cbdi up",
         description="Run a scenario: a Zenoh router, the world and every agent's services as "
         "separate processes. Exit codes: 0 run ended as asked, 1 a service failed, "
-        "2 bad usage or scenario, 3 the time limit came before all litter was recycled, "
+        "2 bad usage or scenario, 3 the time limit came before the world was done, "
         "130 interrupted (Ctrl-C).",
     )
     scenario_arguments(p)
@@ -49,13 +50,11 @@ def _parser() -> argparse.ArgumentParser:
 def scenario_arguments(p: argparse.ArgumentParser) -> None:
     """Add the scenario and the flags that override its run settings (`cbdi up`, `cbdi
     compose`); `scenario_from_args` reads them back."""
-    p.add_argument(
-        "scenario", help="scenario name (domains/recycling/scenarios/NAME.toml) or a file"
-    )
+    p.add_argument("scenario", help="scenario name (domains/DOMAIN/scenarios/NAME.toml) or a file")
     p.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
     p.add_argument("--speed", type=float, help="simulated seconds per wall second")
     p.add_argument("--seed", type=int, help="seed of the world's random generator")
-    p.add_argument("--until", help="'done' (all litter recycled) or simulated SECONDS")
+    p.add_argument("--until", help="'done' (the world's goals met) or simulated SECONDS")
     p.add_argument("--max-time", type=float, help="simulated seconds before a 'done' run gives up")
     p.add_argument(
         "--lockstep",
@@ -63,22 +62,13 @@ def scenario_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="advance an epoch only once every agent acknowledged the last one",
     )
-    p.add_argument("--move-step", type=int, help="people step every N epochs (paper: 4 or 8)")
-    p.add_argument("--det-area", type=int, help="agents' detection depth (paper: 1 to 3)")
-    p.add_argument("--known-litter", type=int, help="litter items known at start (paper: 2, 3)")
-    p.add_argument("--spawn", type=float, help="probability of new litter per epoch")
     p.add_argument(
-        "--people-phase",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="people start at a seeded cell of their loop (not its first)",
-    )
-    p.add_argument("--people-jitter", type=int, help="people step up to N epochs early or late")
-    p.add_argument(
-        "--duration-noise", type=float, help="actions last a seeded 0..F longer (whole epochs)"
-    )
-    p.add_argument(
-        "--failure-probability", type=float, help="chance that an accepted action fails at its end"
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set an option of the scenario's simulator (its [world] table), e.g. "
+        "--option people_jitter=1; an unknown one is refused with the list of known ones",
     )
     p.add_argument(
         "--mode",
@@ -164,22 +154,7 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
     run = scenario.run
     if args.until is not None:
         run = replace(run, until=check_until(args.until, "--until", "until"))
-    for name in (
-        "speed",
-        "seed",
-        "max_time",
-        "lockstep",
-        "move_step",
-        "det_area",
-        "known_litter",
-        "spawn",
-        "mode",
-        "planning_speed",
-        "people_phase",
-        "people_jitter",
-        "duration_noise",
-        "failure_probability",
-    ):
+    for name in ("speed", "seed", "max_time", "lockstep", "mode", "planning_speed"):
         value = getattr(args, name)
         if value is not None:
             run = replace(run, **{name: value})
@@ -187,10 +162,16 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         raise ConfigError("--speed", "speed", "must be > 0 (0, flat out, only with --lockstep)")
     if not math.isfinite(run.planning_speed) or run.planning_speed < 0:
         raise ConfigError("--planning-speed", "planning_speed", "must be a finite number > 0")
-    problems = check_chance(run) + check_ranges(run)
+    problems = check_ranges(run)
     if problems:
         field, reason = problems[0]
         raise ConfigError(f"--{field.replace('_', '-')}", field, reason)
+    if args.option:
+        simulator = load_simulator(run.simulator, "--option")
+        given = parse_option_pairs(args.option, "--option")
+        options = read_options(simulator, {**scenario.options, **given}, "--option")
+        scenario = replace(scenario, options=options)
+        check_performed(scenario)
     scenario = replace(scenario, run=run)
     scenario = scenario.with_agents(args.agents) if args.agents else scenario
     if not any(a.kind == "bdi" for a in scenario.agents):

@@ -409,10 +409,7 @@ async def _collect_stats(bus: Bus, summary: RunSummary) -> None:
         summary.stats = {
             "epoch": stats.epoch,
             "time": stats.time,
-            "litter_on_ground": stats.litter_on_ground,
-            "litter_held": stats.litter_held,
-            "litter_recycled": stats.litter_recycled,
-            "litter_spawned": stats.litter_spawned,
+            **stats.totals,  # the simulator's own totals, by name
             "agents": {a.agent: _agent_dict(a) for a in stats.agents},
         }
         summary.epochs = summary.epochs or stats.epoch
@@ -420,5 +417,6 @@ async def _collect_stats(bus: Bus, summary: RunSummary) -> None:
 
 
 def _agent_dict(a: Any) -> dict[str, int | float]:
-    counts = ("moves", "pickups", "recycled", "blocked", "failed", "rejected", "contacts")
-    return {**{k: getattr(a, k) for k in counts}, "busy": a.busy}
+    """One agent's counters: the generic ones, the simulator's own (`counts`), busy time."""
+    generic = ("moves", "blocked", "failed", "rejected", "contacts")
+    return {**{k: getattr(a, k) for k in generic}, **a.counts, "busy": a.busy}

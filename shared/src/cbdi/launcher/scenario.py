@@ -1,28 +1,22 @@
 """Scenario files: which map, which agents (and of which kind), and run settings.
 
-A scenario lives in `domains/recycling/scenarios/<name>.toml`:
+A scenario lives in `domains/<domain>/scenarios/<name>.toml`:
 
-    name = "paper-7x7"
-    map = "../maps/paper-7x7.toml"     # relative to the scenario file
+    name = "courier"
+    map = "../maps/floor.toml"         # relative to the scenario file
     [run]
+    simulator = "courier" # the domain's simulator the world hosts (cbdi.simulators)
     speed = 4.0          # simulated seconds per wall second
     seed = 1
     until = "done"       # or a number of simulated seconds
     max_time = 600.0     # simulated seconds after which a "done" run gives up
     lockstep = false
-    move_step = 4        # the paper's situation: people's pace, detection depth,
-    det_area = 1         #   and how many litter items are known at the start
-    known_litter = 2
-    people_phase = true  # the seed also picks where on their loop people start,
-    people_jitter = 1    #   a +-1 epoch jitter of their steps,
-    duration_noise = 0.0 #   a 0..F stretch of action durations (experiments),
-    failure_probability = 0.0  # and actions failing at random (experiments)
-    binding = "recycling" # how the world performs the agents' PDDL actions
+    [world]              # the simulator's own options (its `Options`; cbdi.simulator)
     [[agents]]
     name = "robot1"
-    kind = "scripted"    # which services make up the agent: scripted, or bdi with
-    # agent_file = "../agents/recycler.toml"   (planner, scheduler and executor)
-    detection_depth = 1
+    kind = "bdi"         # which services make up the agent: bdi (planner, scheduler and
+    agent_file = "../agents/courier.toml"   # executor), or scripted (a domain's
+    detection_depth = 1  # `cbdi scripted-agent` command in the executor's place)
 """
 
 from __future__ import annotations
@@ -31,22 +25,20 @@ import math
 import os
 import tomllib
 from dataclasses import dataclass, replace
+from dataclasses import field as dataclass_field
 from pathlib import Path
 from typing import Any
 
 from cbdi import keys
 from cbdi.agentfile import AgentFileError, domain_actions, read_agent_file
-from cbdi.chance import chance_problems
 from cbdi.errors import ConfigError
-from cbdi.plugins import load_binding
-from cbdi.simulator import load_simulator
+from cbdi.simulator import OptionValue, load_simulator, performed_actions, read_options
 
 __all__ = [
     "AGENT_KINDS",
     "AgentEntry",
     "RunSettings",
     "Scenario",
-    "check_chance",
     "check_performed",
     "check_ranges",
     "check_until",
@@ -82,36 +74,18 @@ class RunSettings:
     until: str = "done"
     max_time: float = 600.0
     lockstep: bool = False
-    move_step: int = 0  # people step every N epochs (0: the map's)
-    det_area: int = -1  # the agents' detection depth (-1: the map's or the agent's)
-    known_litter: int = -1  # litter items known at the start (-1: the map's)
-    spawn: float = -1.0  # probability of new litter per epoch (-1: the map's)
     mode: str = ""  # BDI agents' planning: online, offline ("": each agent file's)
     planning_speed: float = 0.0  # virtual time: expansions per simulated s (0: agent file's)
-    people_phase: bool = False  # people start at a seeded cell of their loop
-    people_jitter: int = 0  # people step up to N epochs early or late (seeded)
-    duration_noise: float = 0.0  # actions last a seeded 0..F longer (whole epochs)
-    failure_probability: float = 0.0  # accepted actions fail at their end with this chance
-    binding: str = "recycling"  # how the world performs PDDL actions (cbdi.bindings)
-    simulator: str = ""  # a domain's simulator the world hosts (cbdi.simulators; "": grid)
+    simulator: str = ""  # the domain's simulator the world hosts (cbdi.simulators): needed
 
 
 PLANNING_MODES = ("", "online", "offline")
-
-
-def check_chance(run: RunSettings) -> list[tuple[str, str]]:
-    """Return `(field, reason)` for each of the world's chance options out of range."""
-    return chance_problems(run.people_jitter, run.duration_noise, run.failure_probability)
-
 
 # The lowest value of each numeric run setting; NaN and infinities never pass.
 _LOWEST: dict[str, float] = {
     "speed": 0.0,
     "seed": 0,
     "max_time": 0.0,
-    "move_step": 0,
-    "det_area": -1,
-    "known_litter": -1,
     "planning_speed": 0.0,
 }
 
@@ -124,8 +98,6 @@ def check_ranges(run: RunSettings) -> list[tuple[str, str]]:
         if not (math.isfinite(value) and value >= low) or (name == "max_time" and value == 0):
             bound = "above 0" if name == "max_time" else f">= {low:g}"
             problems.append((name, f"expected a finite number {bound}, got {value!r}"))
-    if not (run.spawn == -1 or 0 <= run.spawn <= 1):
-        problems.append(("spawn", f"expected a probability in [0, 1] (or -1), got {run.spawn!r}"))
     return problems
 
 
@@ -155,6 +127,8 @@ class Scenario:
     map_path: Path
     agents: tuple[AgentEntry, ...]
     run: RunSettings
+    # The simulator's own options (the `[world]` table, `--option`), checked and typed.
+    options: dict[str, OptionValue] = dataclass_field(default_factory=dict)
 
     def with_agents(self, count: int) -> Scenario:
         """Return the scenario with `count` agents: the first ones, or more of the last kind."""
@@ -174,8 +148,8 @@ class Scenario:
 
 
 def _domain_scenarios(domains: Path) -> list[Path]:
-    """Each domain's scenario folder under `domains` (recycling first, then by name)."""
-    found = sorted(domains.glob("*/scenarios"), key=lambda p: (p.parent.name != "recycling", p))
+    """Each domain's scenario folder under `domains`, by name."""
+    found = sorted(domains.glob("*/scenarios"))
     return [p for p in found if p.is_dir()]
 
 
@@ -226,12 +200,20 @@ def load_scenario(path: Path) -> Scenario:
         raise ConfigError(where, "agents", "a scenario needs at least one agent")
     if len({a.name for a in agents}) != len(agents):
         raise ConfigError(where, "agents", "agent names must be unique")
+    run = _run(data.get("run", {}), where)
+    if not run.simulator:
+        raise ConfigError(where, "run.simulator", "missing: name the domain's simulator")
+    simulator = load_simulator(run.simulator, f"{where}: run.simulator")
+    world = data.get("world", {})
+    if not isinstance(world, dict):
+        raise ConfigError(where, "world", "expected a table of the simulator's options")
     scenario = Scenario(
         name=str(data.get("name", path.stem)),
         path=path,
         map_path=map_path,
         agents=agents,
-        run=_run(data.get("run", {}), where),
+        run=run,
+        options=read_options(simulator, world, where, "world."),
     )
     check_performed(scenario)
     return scenario
@@ -248,14 +230,11 @@ def performer_actions(scenario: Scenario) -> list[str]:
 
 def check_performed(scenario: Scenario) -> None:
     """Refuse, before anything starts, a BDI agent whose domain has an action nobody
-    performs: not the world (its binding) and not a performer the agent file names."""
+    performs: not the world (its simulator) and not a performer the agent file names."""
     run = scenario.run
-    if run.simulator:
-        world_actions = load_simulator(run.simulator, f"{scenario.path}: run.simulator").actions
-        who = f"the world ({run.simulator!r} simulator)"
-    else:
-        world_actions = load_binding(run.binding, f"{scenario.path}: run.binding").actions
-        who = f"the world ({run.binding!r} binding)"
+    simulator = load_simulator(run.simulator, f"{scenario.path}: run.simulator")
+    world_actions = performed_actions(simulator, scenario.options)
+    who = f"the world ({run.simulator!r} simulator)"
     for agent in scenario.agents:
         if agent.kind != "bdi" or agent.agent_file is None:
             continue
@@ -340,7 +319,7 @@ def _run(raw: Any, where: str) -> RunSettings:
     if unknown:
         raise ConfigError(where, "run", f"unknown settings: {', '.join(sorted(unknown))}")
     run = replace(base, **values)
-    problems = check_chance(run) + check_ranges(run)
+    problems = check_ranges(run)
     if problems:
         field, reason = problems[0]
         raise ConfigError(where, f"run.{field}", reason)

@@ -61,7 +61,8 @@ def plan_services(
 
 
 def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
-    """Return the world's arguments: the map, the run settings, agents and members."""
+    """Return the world's arguments: the map, the simulator and its options, the run
+    settings, agents and members."""
     run = scenario.run
     args = ["--map", path_of(scenario.map_path), "--speed", str(run.speed)]
     args += ["--seed", str(run.seed)]
@@ -70,23 +71,21 @@ def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
     else:
         args += ["--max-time", run.until, "--no-stop-when-done"]
     args += ["--lockstep" if run.lockstep else "--no-lockstep"]
-    args += ["--move-step", str(run.move_step), "--det-area", str(run.det_area)]
-    args += ["--known-litter", str(run.known_litter), "--spawn", str(run.spawn)]
-    args += ["--people-phase" if run.people_phase else "--no-people-phase"]
-    args += ["--people-jitter", str(run.people_jitter)]
-    args += ["--duration-noise", str(run.duration_noise)]
-    args += ["--failure-probability", str(run.failure_probability)]
-    args += ["--binding", run.binding]
-    if run.simulator:
-        args += ["--simulator", run.simulator]
+    args += ["--simulator", run.simulator]
+    for key, value in sorted(scenario.options.items()):
+        args += ["--option", f"{key}={_option_text(value)}"]
     for agent in scenario.agents:
-        own = agent.detection_depth is not None and run.det_area < 0
-        depth = f":{agent.detection_depth}" if own else ""
+        depth = f":{agent.detection_depth}" if agent.detection_depth is not None else ""
         args += ["--agent", f"{agent.name}{depth}"]
     for agent in scenario.agents:  # every component the world waits for, from epoch -1
         for component in AGENT_KINDS[agent.kind]:
             args += ["--member", keys.member(agent.name, component)]
     return tuple(args)
+
+
+def _option_text(value: object) -> str:
+    """A simulator option as `--option` reads it back (`true`/`false` for booleans)."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
 
 
 def _agent_plan(
@@ -108,8 +107,6 @@ def _agent_plan(
             for action in read_agent_file(agent.agent_file, agent.name).performers:
                 args += ["--performer", action]
         return ServicePlan(service, *_BDI_SCRIPTS[component], tuple(args))
-    if agent.kind == "scripted":
-        args = ["--agent", agent.name, "--map", path_of(scenario.map_path)]
-        args += ["--known-litter", str(run.known_litter)]
-        return ServicePlan(service, "cbdi-scripted-agent", "cbdi_world.scripted.cli", tuple(args))
+    if agent.kind == "scripted":  # a domain's scripted robot (it asks the world its map)
+        return ServicePlan(service, "cbdi", "cbdi.cli", ("scripted-agent", "--agent", agent.name))
     raise CbdiError(f"agent kind {agent.kind!r} has no services")

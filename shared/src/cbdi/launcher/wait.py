@@ -1,8 +1,8 @@
 """`cbdi wait`: wait for the world's end of run and exit with the run's result.
 
 A compose file's `wait` service (`cbdi compose`), so that `docker-compose up
---exit-code-from wait` returns what `cbdi up` would: 0 the run ended as asked (all litter
-recycled, or the time of a timed run), 3 the time limit came first, 1 it never ended
+--exit-code-from wait` returns what `cbdi up` would: 0 the run ended as asked (the world
+done, or the time of a timed run), 3 the time limit came first, 1 it never ended
 (stopped, or `--timeout` wall seconds passed). The world keeps running after its end,
 so this service is the first to exit and the others are stopped after it.
 """
@@ -33,7 +33,7 @@ class WaitSettings(ServiceSettings):
 
     until: str = field(
         default="done",
-        metadata={"help": "the end that succeeds: done (all litter recycled) or time_limit"},
+        metadata={"help": "the end that succeeds: done (the world's goals met) or time_limit"},
     )
     timeout: float = field(default=0.0, metadata={"help": "wall seconds at most (0: no limit)"})
 
@@ -74,13 +74,12 @@ async def _follow(ctx: ServiceContext, settings: WaitSettings, result: list[int]
     except (CbdiError, TimeoutError) as exc:
         ctx.log.warning("no_stats", error=str(exc))
     else:
-        recycled = {a.agent: a.recycled for a in stats.agents}
-        ctx.log.info(
-            "stats",
-            litter_recycled=stats.litter_recycled,
-            litter_on_ground=stats.litter_on_ground,
-            **{f"{name}_recycled": count for name, count in recycled.items()},
-        )
+        per_agent = {
+            f"{a.agent}_{name}": count
+            for a in stats.agents
+            for name, count in {"moves": a.moves, **a.counts}.items()
+        }
+        ctx.log.info("stats", done=stats.done, **stats.totals, **per_agent)
     ctx.stop(result[0])
 
 
@@ -92,6 +91,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="cbdi wait",
         section="wait",
         description="Wait for the world's end of run and exit with its result: 0 as asked, "
-        "3 the time limit came before all litter was recycled, 1 no end seen.",
+        "3 the time limit came before the world was done, 1 no end seen.",
     )
     return run_service(settings, "wait", _wait)

@@ -1,6 +1,7 @@
 """Wire types of the shared world: clock, actions, percepts, snapshots, statistics.
 
-Cells are `(x, y)` with x the column and y the row, as in the paper's `c_X_Y` names.
+Cells are `(x, y)` with x the column and y the row of a grid world's map. A domain's
+simulator fills them (`cbdi.simulator`): its items, people and statistics by name.
 Times are simulated seconds (the domain's time units); an epoch lasts `epoch_duration`.
 """
 
@@ -37,7 +38,7 @@ __all__ = [
     "Cell",
     "ClockRequest",
     "EpochAck",
-    "LitterView",
+    "ItemView",
     "OutcomeStatus",
     "Percepts",
     "PersonView",
@@ -54,9 +55,6 @@ Pose = tuple[Finite, Finite]
 
 OutcomeStatus = Literal["succeeded", "failed"]
 
-# Action names the world accepts; durations come from the recycling domain.
-ACTIONS = ("move", "pickup", "recycle")
-
 
 class Tick(Message, frozen=True, tag="cbdi.world.Tick/1"):
     """Publish the world's clock once per epoch: the simulated clock follows this."""
@@ -71,12 +69,11 @@ class Tick(Message, frozen=True, tag="cbdi.world.Tick/1"):
 class ActionRequest(Message, frozen=True, tag="cbdi.world.ActionRequest/1"):
     """Ask the world (or a performer) to start an action for `agent`.
 
-    With `args`, `action` is a grounded PDDL action, as an executor sends it: the world
-    binds it to what it simulates (its domain's binding, `cbdi.bindings`), a performer
-    carries it out. Without, it is one of the grid world's own actions: `move` needs
-    `target` (a 4-adjacent cell); `pickup` takes the litter in the agent's cell (`item`
-    optional, to pick a specific one); `recycle` puts held litter (`item`, or the first
-    held) into a bin next to the agent. `duration` is the plan's (0: not given).
+    With `args`, `action` is a grounded PDDL action, as an executor sends it: the world's
+    simulator performs it, or a performer carries it out. Without, it is one of a
+    simulator's own primitive actions, with a `target` cell or an `item` as that
+    simulator documents (a scripted robot sends them). `duration` is the plan's (0: not
+    given).
     """
 
     agent: AgentName
@@ -112,8 +109,8 @@ class ActionOutcome(Message, frozen=True, tag="cbdi.world.ActionOutcome/1"):
     item: Symbol | None = None
 
 
-class LitterView(Message, frozen=True, tag="cbdi.world.LitterView/1"):
-    """One litter item lying on a cell; `known` says whether agents knew it from the start."""
+class ItemView(Message, frozen=True, tag="cbdi.world.ItemView/1"):
+    """One item lying on a cell; `known` says whether agents knew of it from the start."""
 
     name: Symbol
     cell: Cell
@@ -125,7 +122,8 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
 
     `free` cells are inside the map and hold no wall, bin, person or agent; `blocked` are
     the other in-map cells of the square (the agent's own cell is reported as blocked by
-    itself only in `position`). `litter` lists the items lying in the square.
+    itself only in `position`). `items` lists the items lying in the square, `holding`
+    those the agent carries.
     """
 
     agent: AgentName
@@ -135,7 +133,7 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     depth: Annotated[int, msgspec.Meta(ge=0, le=1000)]
     free: Many[Cell]
     blocked: Many[Cell]
-    litter: Many[LitterView]
+    items: Many[ItemView]
     holding: Many[Symbol]
 
 
@@ -157,7 +155,7 @@ class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
     fluents: Many[tuple[Atom, Finite]] = []
 
 
-# The percept messages a world publishes (the grid world's, any simulator's).
+# The percept messages a world publishes (a grid sensor's, any simulator's).
 PERCEPTS = (Percepts, Sensed)
 
 
@@ -187,14 +185,16 @@ class BinView(Message, frozen=True, tag="cbdi.world.BinView/1"):
 
 
 class WorldSnapshot(Message, frozen=True, tag="cbdi.world.WorldSnapshot/1"):
-    """Everything that moves, published every epoch for viewers and recorders."""
+    """Everything that moves, published every epoch for viewers and recorders: robots,
+    people (moving obstacles), the items lying on the map and those whose job is done
+    (`completed`: taken off the map for good, a delivered parcel, say)."""
 
     epoch: Count
     time: NonNegative
     agents: Many[AgentView]
     people: Many[PersonView]
-    litter: Many[LitterView]
-    recycled: Many[Symbol]
+    items: Many[ItemView]
+    completed: Many[Symbol]
 
 
 class ClockRequest(Message, frozen=True, tag="cbdi.world.ClockRequest/1"):
@@ -207,7 +207,8 @@ class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"
 
 
 class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
-    """The static part of the world: size, walls, bins, agents and their sensing depth."""
+    """The static part of the world: size, walls, bins (fixed drop-off places), agents
+    and their sensing depth."""
 
     map_name: Text
     width: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
@@ -219,7 +220,7 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     capacity: Count
     epoch_duration: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
     durations: Annotated[dict[Symbol, NonNegative], msgspec.Meta(max_length=1000)]
-    known_litter: Many[LitterView] = []  # litter agents know of at the start
+    known_items: Many[ItemView] = []  # items agents know of at the start
     # The members (`agent/component`) the start barrier, and in lockstep every epoch,
     # waits for.
     members: Many[Symbol] = []
@@ -230,7 +231,7 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
     facts: Many[Atom] = []
     fluents: Many[tuple[Atom, Finite]] = []
-    simulator: Id = ""  # the simulator's name (cbdi.simulators; "" the grid world)
+    simulator: Id = ""  # the simulator's name (entry point cbdi.simulators)
 
 
 ACK_STAGES = ("ready", "beliefs", "done")
@@ -255,18 +256,16 @@ class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
 
 
 class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
-    """Counters for one agent, the paper's metric (moves) first."""
+    """Counters for one agent, the paper's metric (moves) first; a simulator's own
+    counters (pickups, deliveries, charges, ...) in `counts`, by name."""
 
     agent: AgentName
     moves: Count = 0
-    pickups: Count = 0
-    recycled: Count = 0
     blocked: Count = 0
     failed: Count = 0
     rejected: Count = 0
     contacts: Count = 0
     busy: NonNegative = 0.0  # simulated seconds in actions that ended (the rest is idle)
-    # A simulator's own counters (deliveries, charges, ...), by name.
     counts: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=256)] = {}
 
 
@@ -277,15 +276,11 @@ class StatsRequest(Message, frozen=True, tag="cbdi.world.StatsRequest/1"):
 
 
 class WorldStats(Message, frozen=True, tag="cbdi.world.WorldStats/1"):
-    """Per-agent counters and the totals at `epoch` (the grid world's litter totals, a
-    simulator's `totals`); `done` when the run's goals are all met."""
+    """Per-agent counters and the simulator's totals (by name) at `epoch`; `done` when
+    the run's goals are all met."""
 
     epoch: Count
     time: NonNegative
     agents: Many[AgentStats]
-    litter_on_ground: Count = 0
-    litter_held: Count = 0
-    litter_recycled: Count = 0
-    litter_spawned: Count = 0
     done: bool = False
     totals: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=256)] = {}

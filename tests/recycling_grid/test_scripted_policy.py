@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from cbdi_recycling.scripted.policy import Beliefs, Step, greedy_step, next_hop, parse_script
 
-from cbdi.wire.world import LitterView, Percepts
-from cbdi_world.scripted.policy import Beliefs, Step, greedy_step, next_hop, parse_script
+from cbdi.wire.world import ItemView, Percepts
 
 
 def beliefs(**kw: object) -> Beliefs:
@@ -52,7 +52,7 @@ def test_percepts_revise_litter_and_blocked_cells() -> None:
         free=[(1, 1)],
         blocked=[(0, 0), (1, 0), (0, 2)],
         holding=[],
-        litter=[LitterView(name="new", cell=(0, 2), known=False)],
+        items=[ItemView(name="new", cell=(0, 2), known=False)],
     )
     b.revise(p)
     assert b.litter == {"far": (4, 2), "new": (0, 2)}  # sensed empty cell clears "gone"

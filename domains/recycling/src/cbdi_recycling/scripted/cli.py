@@ -18,11 +18,17 @@ from cbdi.errors import CbdiError, ConfigError, WireError
 from cbdi.lockstep import announce_ready
 from cbdi.runtime import ServiceContext, ServiceSettings, load_config, run_service
 from cbdi.runtime.service import ServiceMain
+from cbdi.view import world_info
 from cbdi.wire.base import decode_any
-from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, EpochAck, Percepts
-from cbdi_world.errors import WorldError
-from cbdi_world.maps import WorldMap, load_map, with_situation
-from cbdi_world.scripted.policy import Beliefs, Step, greedy_step, parse_script
+from cbdi.wire.world import (
+    ActionOutcome,
+    ActionReply,
+    ActionRequest,
+    EpochAck,
+    Percepts,
+    WorldInfo,
+)
+from cbdi_recycling.scripted.policy import Beliefs, Step, greedy_step, parse_script
 
 __all__ = ["ScriptedSettings", "main"]
 
@@ -32,14 +38,10 @@ class ScriptedSettings(ServiceSettings):
     """Settings of `cbdi-scripted-agent`."""
 
     agent: str = field(default="robot1", metadata={"help": "agent name (as given to the world)"})
-    map: str = field(default="", metadata={"help": "the world's map file (walls and bins)"})
     script: str = field(
         default="", metadata={"help": "steps 'move:X,Y pickup recycle ...'; empty: greedy"}
     )
     retries: int = field(default=20, metadata={"help": "script mode: tries per step"})
-    known_litter: int = field(
-        default=-1, metadata={"help": "litter items known at start (as given to the world)"}
-    )
 
 
 class ScriptedAgent:
@@ -134,24 +136,24 @@ class ScriptedAgent:
         )
 
 
-def _beliefs(world_map: WorldMap) -> Beliefs:
+def beliefs_of(info: WorldInfo) -> Beliefs:
+    """What the agent knows at the start: the world's static part and the known litter."""
     return Beliefs(
-        width=world_map.width,
-        height=world_map.height,
-        walls=frozenset(world_map.walls),
-        bins=frozenset(world_map.bins.values()),
-        capacity=world_map.capacity,
-        litter={name: cell for name, (cell, known) in world_map.litter.items() if known},
+        width=info.width,
+        height=info.height,
+        walls=frozenset(info.walls),
+        bins=frozenset(b.cell for b in info.bins),
+        capacity=info.capacity,
+        litter={item.name: item.cell for item in info.known_items},
     )
 
 
-def scripted_main(
-    settings: ScriptedSettings, beliefs: Beliefs, script: list[Step] | None
-) -> ServiceMain:
-    """Return the service body of one scripted agent."""
+def scripted_main(settings: ScriptedSettings, script: list[Step] | None) -> ServiceMain:
+    """Return the service body of one scripted agent: it asks the world for its map."""
 
     async def body(ctx: ServiceContext) -> None:
         samples = ctx.bus.subscribe(keys.world_for_agent(settings.agent))
+        beliefs = beliefs_of(await world_info(ctx.bus, timeout=30.0))
         agent = ScriptedAgent(ctx, settings.agent, beliefs, script, settings.retries)
         ctx.start(agent.run(samples), name="agent")
         ready = announce_ready(ctx.bus, settings.agent, "executor", lambda: agent.started)
@@ -171,14 +173,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             description=__doc__ or "",
         )
         keys.validate_name(settings.agent)
-        world_map = with_situation(load_map(settings.map), known_litter=settings.known_litter)
-        beliefs = _beliefs(world_map)
         script = parse_script(settings.script) if settings.script else None
-    except (ConfigError, WorldError, ValueError) as exc:
+    except (ConfigError, ValueError) as exc:
         print(f"cbdi-scripted-agent: {exc}", file=sys.stderr)
         return 2
     service = keys.service_id("executor", settings.agent)
-    return run_service(settings, service, scripted_main(settings, beliefs, script))
+    return run_service(settings, service, scripted_main(settings, script))
 
 
 if __name__ == "__main__":

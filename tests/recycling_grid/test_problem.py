@@ -7,10 +7,9 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from cbdi_world.errors import MapError
-from cbdi_world.maps import load_map, parse_map
-from cbdi_world.problem import main, problem_text
+from cbdi_recycling.errors import MapError
+from cbdi_recycling.maps import load_map, parse_map
+from cbdi_recycling.problem import main, problem_text
 
 ROOT = Path(__file__).resolve().parents[2]
 DOMAIN = ROOT / "domains/recycling/pddl/domain.pddl"

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from cbdi.wire.world import ActionRequest, Cell, OutcomeStatus
 
 if TYPE_CHECKING:
-    from cbdi_world.world import AgentState, World
+    from cbdi_recycling.world import AgentState, World
 
 __all__ = ["Action", "check_request", "complete", "fail"]
 

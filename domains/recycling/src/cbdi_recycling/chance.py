@@ -15,9 +15,9 @@ import random
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
-from cbdi.chance import chance_problems
 from cbdi.wire.world import Cell
-from cbdi_world.errors import WorldError
+from cbdi_recycling.errors import GridError
+from cbdi_recycling.limits import chance_problems
 
 __all__ = ["Chance", "countdown", "epochs_of", "fails", "start_index", "stream"]
 
@@ -44,7 +44,7 @@ class Chance:
         j, noise, p = self.people_jitter, self.duration_noise, self.failure_probability
         problems = chance_problems(j, noise, p)
         if problems:
-            raise WorldError("; ".join(f"{option}: {reason}" for option, reason in problems))
+            raise GridError("; ".join(f"{option}: {reason}" for option, reason in problems))
 
 
 def stream(seed: int, purpose: str) -> random.Random:
@@ -55,7 +55,7 @@ def stream(seed: int, purpose: str) -> random.Random:
 def start_index(path: Sequence[Cell], taken: Collection[Cell], rng: random.Random) -> int:
     """Return a seeded index of `path` whose cell is not taken: the drawn one or the next free.
 
-    Raise `WorldError` when every cell of the loop is taken (the person has nowhere to
+    Raise `GridError` when every cell of the loop is taken (the person has nowhere to
     stand), rather than put two bodies in one cell.
     """
     first = rng.randrange(len(path))
@@ -63,7 +63,7 @@ def start_index(path: Sequence[Cell], taken: Collection[Cell], rng: random.Rando
         index = (first + k) % len(path)
         if path[index] not in taken:
             return index
-    raise WorldError(f"no free cell on the loop {[list(c) for c in path]} to start on")
+    raise GridError(f"no free cell on the loop {[list(c) for c in path]} to start on")
 
 
 def countdown(move_step: int, jitter: int, rng: random.Random) -> int:

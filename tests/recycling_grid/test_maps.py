@@ -5,9 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
-from cbdi_world.errors import MapError
-from cbdi_world.maps import load_map, parse_map
+from cbdi_recycling.errors import MapError
+from cbdi_recycling.maps import load_map, parse_map
 
 MAPS = Path(__file__).resolve().parents[2] / "domains" / "recycling" / "maps"
 
@@ -92,7 +91,7 @@ def test_missing_file(tmp_path: Path) -> None:
 
 
 def test_situation_overrides_people_depth_and_known_litter() -> None:
-    from cbdi_world.maps import with_situation
+    from cbdi_recycling.maps import with_situation
 
     m = load_map(MAPS / "paper-7x7.toml")
     s = with_situation(m, move_step=8, detection_depth=3, known_litter=2)

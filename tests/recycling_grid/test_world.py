@@ -5,13 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.errors import GridError as WorldError
+from cbdi_recycling.errors import MapError, UnknownAgentError
+from cbdi_recycling.maps import load_map, parse_map
+from cbdi_recycling.world import AgentSpec, World
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cbdi.wire.world import ActionRequest
-from cbdi_world.errors import MapError, UnknownAgentError, WorldError
-from cbdi_world.maps import load_map, parse_map
-from cbdi_world.world import AgentSpec, World
 
 MAPS = Path(__file__).resolve().parents[2] / "domains" / "recycling" / "maps"
 
@@ -97,7 +98,7 @@ def test_pickup_and_recycle_follow_the_domain() -> None:
     assert run(w, 3) == ["recycle:succeeded:"]
     assert w.done and w.recycled == ["plastic_4_1"]
     s = w.stats().agents[0]
-    assert (s.moves, s.pickups, s.recycled) == (6, 1, 1)
+    assert (s.moves, s.counts["pickups"], s.counts["recycled"]) == (6, 1, 1)
 
 
 def test_capacity_is_enforced() -> None:
@@ -200,7 +201,7 @@ def test_sensing_square_is_clipped_and_sees_litter_and_others() -> None:
             load_map(MAPS / "paper-7x7.toml"), [AgentSpec("r", (3, 2), detection_depth=4)]
         )
         .percepts("r")
-        .litter
+        .items
     } == {"plastic_6_1", "plastic_4_6", "plastic_3_6"}
 
 

@@ -7,10 +7,10 @@ from collections import deque
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.generate import Recipe, generate_map, main
+from cbdi_recycling.maps import parse_map
 
 from cbdi.launcher.scenario import load_scenario
-from cbdi_world.generate import Recipe, generate_map, main
-from cbdi_world.maps import parse_map
 
 
 def reachable(free: set[tuple[int, int]], start: tuple[int, int]) -> set[tuple[int, int]]:

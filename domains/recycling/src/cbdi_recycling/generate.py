@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cbdi.wire.world import Cell
-from cbdi_world.errors import WorldError
-from cbdi_world.maps import parse_map
+from cbdi_recycling.errors import GridError
+from cbdi_recycling.maps import parse_map
 
 __all__ = ["Recipe", "generate_map", "main", "scenario_text"]
 
@@ -139,7 +139,7 @@ class _Layout:
                 continue
             self.walls = before
             self.bins.pop()
-        raise WorldError(f"could not place {self.r.bins} bins on a {self.w}x{self.h} map")
+        raise GridError(f"could not place {self.r.bins} bins on a {self.w}x{self.h} map")
 
     def place_walls(self) -> None:
         target = round(self.r.wall_fraction * self.w * self.h)
@@ -199,10 +199,10 @@ def generate_map(seed: int, recipe: Recipe | None = None) -> str:
     lay.rng.shuffle(free)
     starts = [c for c in free if c not in on_loops][: r.agents]
     if len(starts) < r.agents:
-        raise WorldError(f"seed {seed}: no room for {r.agents} agents off the people's loops")
+        raise GridError(f"seed {seed}: no room for {r.agents} agents off the people's loops")
     rest = [c for c in free if c not in starts and c not in {loop[0] for loop in loops}]
     if len(rest) < r.litter:
-        raise WorldError(f"seed {seed}: no room for {r.litter} litter items ({len(rest)} cells)")
+        raise GridError(f"seed {seed}: no room for {r.litter} litter items ({len(rest)} cells)")
     litter = rest[: r.litter]
     known = r.litter if r.known_litter < 0 else r.known_litter
     rows = []
@@ -255,8 +255,8 @@ def scenario_text(map_path: Path, scenario_path: Path, agents: int, agent_file: 
     return (
         f'name = "{rel.stem}-bdi"\n'
         f'map = "{rel if not rel.is_relative_to(base) else rel.relative_to(base)}"\n\n'
-        '[run]\nspeed = 10.0\nseed = 1\nuntil = "done"\nmax_time = 600.0\nlockstep = true\n'
-        "people_phase = true\n" + entries
+        '[run]\nsimulator = "recycling"\nspeed = 10.0\nseed = 1\nuntil = "done"\n'
+        "max_time = 600.0\nlockstep = true\n[world]\npeople_phase = true\n" + entries
     )
 
 
@@ -310,7 +310,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             bottleneck=args.bottleneck,
         )
         text = generate_map(args.seed, recipe)
-    except (ValueError, WorldError) as exc:
+    except (ValueError, GridError) as exc:
         print(f"cbdi map: {exc}", file=sys.stderr)
         return 2
     if args.output is None:

@@ -14,14 +14,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.chance import Chance, countdown, epochs_of, start_index, stream
+from cbdi_recycling.errors import GridError as WorldError
+from cbdi_recycling.maps import WorldMap, load_map, parse_map
+from cbdi_recycling.world import AgentSpec, EpochResult, World
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cbdi.wire.world import ActionRequest
-from cbdi_world.chance import Chance, countdown, epochs_of, start_index, stream
-from cbdi_world.errors import WorldError
-from cbdi_world.maps import WorldMap, load_map, parse_map
-from cbdi_world.world import AgentSpec, EpochResult, World
 
 MAPS = Path(__file__).resolve().parents[2] / "domains" / "recycling" / "maps"
 PAPER = load_map(MAPS / "paper-7x7.toml")
@@ -117,9 +117,9 @@ def test_everything_off_is_the_world_of_before() -> None:
 def test_streams_are_the_same_in_every_process_whatever_pythonhashseed() -> None:
     script = f"""
 from cbdi.wire.world import ActionRequest
-from cbdi_world.chance import Chance
-from cbdi_world.maps import load_map
-from cbdi_world.world import AgentSpec, World
+from cbdi_recycling.chance import Chance
+from cbdi_recycling.maps import load_map
+from cbdi_recycling.world import AgentSpec, World
 m = load_map({str(MAPS / "warehouse-15x15.toml")!r})
 c = Chance(people_phase=True, people_jitter=2, duration_noise=1.0, failure_probability=0.3)
 w = World(m, [AgentSpec("r", m.agent_starts[0])], seed=5, chance=c)

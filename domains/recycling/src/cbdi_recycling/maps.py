@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from cbdi.wire.world import Cell
-from cbdi_world.errors import MapError
+from cbdi_recycling.errors import MapError
 
 __all__ = [
     "DEFAULT_DURATIONS",

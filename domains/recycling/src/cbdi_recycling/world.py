@@ -4,7 +4,7 @@
 the reason); `step` advances one epoch: due actions complete (in order of end time, then
 agent name), people advance along their loops, litter may appear, bodies glide, and every
 agent senses the square around it. Same map, agents, seed, `Chance` and requests: the
-same run (what the seed samples is in `cbdi_world.chance`).
+same run (what the seed samples is in `cbdi_recycling.chance`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from cbdi.wire.world import (
     AgentView,
     BinView,
     Cell,
-    LitterView,
+    ItemView,
     OutcomeStatus,
     Percepts,
     PersonView,
@@ -30,15 +30,18 @@ from cbdi.wire.world import (
     WorldSnapshot,
     WorldStats,
 )
-from cbdi_world.chance import Chance, countdown, epochs_of, fails, start_index, stream
-from cbdi_world.errors import UnknownAgentError, WorldError
-from cbdi_world.maps import WorldMap
-from cbdi_world.physics import Physics
-from cbdi_world.rules import Action, check_request, complete, fail
+from cbdi_recycling.chance import Chance, countdown, epochs_of, fails, start_index, stream
+from cbdi_recycling.errors import GridError, UnknownAgentError
+from cbdi_recycling.maps import WorldMap
+from cbdi_recycling.physics import Physics
+from cbdi_recycling.rules import Action, check_request, complete, fail
 
 __all__ = ["AgentSpec", "EpochResult", "World"]
 
 _EPS = 1e-9
+# The counters every world keeps (fields of AgentStats), and this world's own.
+_GENERIC_COUNTS = ("moves", "blocked", "failed", "rejected", "contacts")
+_OWN_COUNTS = ("pickups", "recycled")
 
 
 @dataclass(frozen=True)
@@ -149,11 +152,11 @@ class World:
 
     def _place(self, spec: AgentSpec) -> None:
         if spec.name in self.agents:
-            raise WorldError(f"agent {spec.name!r} given twice")
+            raise GridError(f"agent {spec.name!r} given twice")
         if not self.map.inside(spec.start) or spec.start in self.blocked_static:
-            raise WorldError(f"agent {spec.name!r} cannot start on {list(spec.start)}")
+            raise GridError(f"agent {spec.name!r} cannot start on {list(spec.start)}")
         if spec.start in self.occupant:
-            raise WorldError(f"agent {spec.name!r} would start on {self.occupant[spec.start]}")
+            raise GridError(f"agent {spec.name!r} would start on {self.occupant[spec.start]}")
         self.agents[spec.name] = AgentState(spec, spec.start)
         self.occupant[spec.start] = spec.name
 
@@ -317,7 +320,7 @@ class World:
                 else:
                     free.append(cell)
         seen = [
-            LitterView(name=n, cell=c, known=n in self.known)
+            ItemView(name=n, cell=c, known=n in self.known)
             for n, c in self.litter.items()
             if abs(c[0] - ax) <= d and abs(c[1] - ay) <= d
         ]
@@ -329,7 +332,7 @@ class World:
             depth=d,
             free=free,
             blocked=blocked,
-            litter=seen,
+            items=seen,
             holding=list(agent.holding),
         )
 
@@ -347,33 +350,40 @@ class World:
             for n, a in self.agents.items()
         ]
         people = [PersonView(name=p.name, cell=p.cell, pose=pose(p.name)) for p in self.people]
-        litter = [LitterView(name=n, cell=c, known=n in self.known) for n, c in self.litter.items()]
+        litter = [ItemView(name=n, cell=c, known=n in self.known) for n, c in self.litter.items()]
         return WorldSnapshot(
             epoch=self.epoch,
             time=self.time,
             agents=agents,
             people=people,
-            litter=litter,
-            recycled=list(self.recycled),
+            items=litter,
+            completed=list(self.recycled),
         )
 
     def stats(self, agent: str = "") -> WorldStats:
         """Per-agent counters (one agent, or all when `agent` is empty) and litter totals."""
         names = [self.agent(agent).spec.name] if agent else list(self.agents)
-        rows = [
-            AgentStats(agent=n, busy=round(self.agents[n].busy, 9), **self.agents[n].stats)  # type: ignore[arg-type]
-            for n in names
-        ]
+        rows = [self._agent_stats(n) for n in names]
         return WorldStats(
             epoch=self.epoch,
             time=self.time,
             agents=rows,
-            litter_on_ground=len(self.litter),
-            litter_held=len(self.in_hand),
-            litter_recycled=len(self.recycled),
-            litter_spawned=self.spawned,
             done=self.done,
+            totals={
+                "litter_on_ground": len(self.litter),
+                "litter_held": len(self.in_hand),
+                "litter_recycled": len(self.recycled),
+                "litter_spawned": self.spawned,
+            },
         )
+
+    def _agent_stats(self, name: str) -> AgentStats:
+        """One agent's row: the generic counters as fields, pickups and recycled in
+        `counts` (zero when nothing happened, as before they were fields)."""
+        a = self.agents[name]
+        generic = {k: v for k, v in a.stats.items() if k in _GENERIC_COUNTS}
+        counts = {k: a.stats.get(k, 0) for k in _OWN_COUNTS}
+        return AgentStats(agent=name, busy=round(a.busy, 9), counts=counts, **generic)
 
     def info(self) -> WorldInfo:
         """The static part of the world."""
@@ -389,9 +399,7 @@ class World:
             capacity=m.capacity,
             epoch_duration=m.epoch_duration,
             durations=dict(m.durations),
-            known_litter=[
-                LitterView(name=n, cell=c, known=True)
-                for n, (c, known) in m.litter.items()
-                if known
+            known_items=[
+                ItemView(name=n, cell=c, known=True) for n, (c, known) in m.litter.items() if known
             ],
         )

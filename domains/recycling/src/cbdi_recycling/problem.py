@@ -16,8 +16,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from cbdi.wire.world import Cell
-from cbdi_world.errors import MapError
-from cbdi_world.maps import WorldMap, load_map
+from cbdi_recycling.errors import MapError
+from cbdi_recycling.maps import WorldMap, load_map
 
 __all__ = ["main", "problem_text"]
 

@@ -49,7 +49,7 @@ class Beliefs:
         self.holding = tuple(p.holding)
         square = {*p.free, *p.blocked, p.position}
         self.sensed |= square
-        seen = {item.name: item.cell for item in p.litter}
+        seen = {item.name: item.cell for item in p.items}
         for name, cell in list(self.litter.items()):
             if cell in square and name not in seen:
                 del self.litter[name]
