@@ -6,7 +6,7 @@ every component of every agent: its start barrier is the readiness, not `depends
 every agent's services, and `wait` (`cbdi wait`), which exits with the run's result:
 
     cbdi compose paper-7x7 --agents 2 -o run.yml
-    docker-compose -f run.yml up --exit-code-from wait     # 0: all litter recycled
+    docker-compose -f run.yml up --exit-code-from wait     # 0: the world done
 
 A run can be split over several compose projects (hosts), each with its own router, the
 routers joined: `--only` picks the agents (and `world`) a project runs, `--join` the
