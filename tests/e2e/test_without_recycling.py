@@ -41,6 +41,11 @@ def test_the_courier_domain_runs_without_the_recycling_package(tmp_path: Path) -
     assert ours.returncode == 0, ours.stderr[-3000:]
     missing = run(venv / "bin/python", "-c", "import cbdi_recycling", cwd=tmp_path)
     assert missing.returncode != 0 and "No module named 'cbdi_recycling'" in missing.stderr
+    # The world service has no built-in domain: without the package, no grid world.
+    grid = REPO / "domains/recycling/maps/paper-7x7.toml"
+    world = run(venv / "bin/cbdi-world", "--simulator", "recycling", "--map", grid, cwd=tmp_path)
+    assert world.returncode == 2
+    assert "no simulator 'recycling' (installed: courier)" in world.stderr
 
     scenario = REPO / "domains/courier/scenarios/courier.toml"
     up = [venv / "bin/cbdi", "up", scenario, "--lockstep", "--json", "--quiet"]
