@@ -32,7 +32,7 @@ def test_courier_robots_deliver_every_parcel(tmp_path: Path) -> None:
     assert report["result"] == "done", report["reason"]
     assert report["planner"]["total"]["forecast_repairs"] >= 1
     agents = report["stats"]["agents"]
-    assert sum(a["pickups"] for a in agents.values()) == 3  # every parcel grabbed once
+    assert sum(a["grab"] for a in agents.values()) == 3  # every parcel grabbed once
 
     recorded = list(read_messages(rec))
     events = [

@@ -208,7 +208,10 @@ def test_broken_map_fails_the_run_at_once_with_the_map_error(tmp_path: Path) -> 
     bad_map = tmp_path / "bad.toml"
     bad_map.write_text('name = "bad"\ngrid = """\nBA.\n.x.\n"""\n')
     scenario = tmp_path / "scenario.toml"
-    scenario.write_text(f'name = "bad"\nmap = "{bad_map}"\n[[agents]]\nname = "robot1"\n')
+    scenario.write_text(
+        f'name = "bad"\nmap = "{bad_map}"\n[run]\nsimulator = "recycling"\n'
+        '[[agents]]\nname = "robot1"\n'
+    )
     result = up(str(scenario), "--json", "--quiet", timeout=60)
     summary = json.loads(result.stdout)
     assert result.returncode == 1 and summary["result"] == "failed"

@@ -5,9 +5,8 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from cbdi.errors import ConfigError
+from cbdi.errors import CbdiError
 from cbdi.runtime import load_config, run_service
-from cbdi_world.errors import WorldError
 from cbdi_world.service import WorldSettings, build_world, world_main
 
 __all__ = ["main"]
@@ -25,7 +24,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "point cbdi.simulators) for every robot: clock, lockstep, percepts, snapshots.",
         )
         world = build_world(settings)
-    except (ConfigError, WorldError) as exc:
+    except CbdiError as exc:  # a bad setting, or a map or option the simulator refuses
         print(f"cbdi-world: {exc}", file=sys.stderr)
         return 2
     return run_service(settings, "world", world_main(world))
