@@ -306,7 +306,8 @@ def _parser() -> argparse.ArgumentParser:
         type=_up_arg,
         action="extend",
         default=[],
-        help="passed to every `cbdi up` (repeat; --up-arg '--option people_jitter=2', --up-arg=--flag)",
+        help="passed to every `cbdi up` (repeat; --up-arg '--option people_jitter=2', "
+        "--up-arg=--flag)",
     )
     p.add_argument(
         "--realtime",
