@@ -205,6 +205,7 @@ class PlannerService(_Epochs):
         self.deferred: SearchRequest | None = None  # a request that came before any beliefs
         self.now = 0.0
         self.request: SearchRequest | None = None
+        self.request_failed = False  # the last request's search failed (a repeat retries)
         self.searching: asyncio.Task[None] | None = None
         self.plan_ids = count(1)
         self.transients = Transients(raw.transient)
@@ -240,6 +241,12 @@ class PlannerService(_Epochs):
             await self.on_request(msg)
 
     async def on_request(self, req: SearchRequest) -> None:
+        if self.repeated(req):
+            # The scheduler sends its search again when it sees this planner appear; the
+            # first time that may come after the search began (when its liveliness event
+            # arrives is up to the machine), so a repeat changes nothing: on it already.
+            self.ctx.log.info("search_repeated", request=req.request_id)
+            return
         if self.searching is not None:
             self.searching.cancel()
             self.searching = None
@@ -262,7 +269,7 @@ class PlannerService(_Epochs):
             self.request = None
             await self.status(req.request_id, "failed", str(exc))
             raise BadRequestError(req.request_id, str(exc)) from exc
-        self.request = req
+        self.request, self.request_failed = req, False
         await self.status(req.request_id, "searching")
         if self.lockstep.on:
             self.pending = _Pending(req, problem)  # searched and paid for epoch by epoch
@@ -369,7 +376,20 @@ class PlannerService(_Epochs):
         blocked = not timeout and self.transients.blocked(self.domain, self.beliefs, req.goal)
         if blocked:
             reason += " (blocked by something that moves: waiting for it)"
+        self.request_failed = True
         await self.status(req.request_id, "failed", reason, blocked)
+
+    def repeated(self, req: SearchRequest) -> bool:
+        """Whether `req` starts the request this planner is on (or has planned) again."""
+        last = self.request
+        return (
+            req.kind == "start"
+            and last is not None
+            and not self.request_failed
+            and req.request_id == last.request_id
+            and not req.problem
+            and [list(g) for g in req.goal] == [list(g) for g in last.goal]
+        )
 
 
 class OnlinePlannerService(_Epochs):
