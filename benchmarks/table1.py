@@ -224,6 +224,7 @@ def _real(args: argparse.Namespace) -> tuple[Runner, BoundMaker]:
         run_timeout=args.run_timeout,
         lockstep_speed=args.speed,
     )
+    assert scenario.map_path is not None  # the recycling grid's scenarios have a map
     maker = partial(make_bounds, map_path=scenario.map_path, options=options, args=args)
     return partial(run_task, options=options, ports=PortPool()), maker
 

@@ -89,7 +89,9 @@ def launcher_world(up_argv: Sequence[str]) -> World:
     settings = load_config(
         WorldSettings, argv[argv.index("--map") :], prog="cbdi-world", section="world", env={}
     )
-    return build_world(settings)
+    world = build_world(settings)
+    assert isinstance(world, World)  # the recycling grid (its scenarios name it)
+    return world
 
 
 def people_timeline(world: World, horizon: int) -> tuple[Change, ...]:

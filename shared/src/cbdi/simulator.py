@@ -25,6 +25,9 @@ field with its default and `metadata={"help": ...}`, and a method `problems()` r
 `cbdi up --option KEY=VALUE` and `cbdi-world --option KEY=VALUE` on the command line, and
 `read_options` checks them by that declaration before anything starts.
 
+A simulator that needs no map file (the world service's `clock`) says so with a class
+attribute `needs_map = False`; a scenario for it has no `map`.
+
 `request` gets grounded PDDL actions (`req.action`, `req.args`) for agents of `info()`
 only (the host answers `unknown_agent` for any other); it rejects what it cannot do with
 an `ActionReply(accepted=False, reason=...)`, and raises for nothing a client sends.

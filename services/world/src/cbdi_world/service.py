@@ -272,11 +272,13 @@ class WorldService:
 def build_world(settings: WorldSettings) -> Simulator:
     """Build the `--simulator` from its map, agents, seed and options; raise a
     CbdiError/WorldError naming what is wrong (a map it refuses names the simulator)."""
-    if not settings.map:
-        raise WorldError("no map given (--map FILE)")
     if not (math.isfinite(settings.linger) and settings.linger >= 0):
         raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
     simulator = load_simulator(settings.simulator, "--simulator")
+    if not settings.map and getattr(simulator, "needs_map", True):
+        raise WorldError(
+            f"no map given (--map FILE): the {settings.simulator!r} simulator needs one"
+        )
     options = read_options(simulator, parse_option_pairs(settings.option, "--option"), "--option")
     agents, depths = agent_entries(settings.agent or ("robot1",))
     members_of(settings.member, list(agents))  # every member names an agent

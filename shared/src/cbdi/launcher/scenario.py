@@ -3,7 +3,7 @@
 A scenario lives in `domains/<domain>/scenarios/<name>.toml`:
 
     name = "courier"
-    map = "../maps/floor.toml"         # relative to the scenario file
+    map = "../maps/floor.toml"         # relative to the scenario file (`clock` needs none)
     [run]
     simulator = "courier" # the domain's simulator the world hosts (cbdi.simulators)
     speed = 4.0          # simulated seconds per wall second
@@ -124,7 +124,7 @@ class Scenario:
 
     name: str
     path: Path
-    map_path: Path
+    map_path: Path | None  # None: a simulator with no map (`clock`)
     agents: tuple[AgentEntry, ...]
     run: RunSettings
     # The simulator's own options (the `[world]` table, `--option`), checked and typed.
@@ -189,10 +189,11 @@ def load_scenario(path: Path) -> Scenario:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), "toml", str(exc)) from None
     where = str(path)
-    map_rel = _get(data, "map", str, where)
-    map_path = (path.parent / map_rel).resolve()
-    if not map_path.is_file():
-        raise ConfigError(where, "map", f"map file {map_path} not found")
+    map_path = None
+    if "map" in data:
+        map_path = (path.parent / _get(data, "map", str, where)).resolve()
+        if not map_path.is_file():
+            raise ConfigError(where, "map", f"map file {map_path} not found")
     agents = tuple(
         _agent(a, i, where, path.parent) for i, a in enumerate(_get(data, "agents", list, where))
     )
@@ -204,6 +205,8 @@ def load_scenario(path: Path) -> Scenario:
     if not run.simulator:
         raise ConfigError(where, "run.simulator", "missing: name the domain's simulator")
     simulator = load_simulator(run.simulator, f"{where}: run.simulator")
+    if map_path is None and getattr(simulator, "needs_map", True):
+        raise ConfigError(where, "map", f"missing: the {run.simulator!r} simulator needs a map")
     world = data.get("world", {})
     if not isinstance(world, dict):
         raise ConfigError(where, "world", "expected a table of the simulator's options")

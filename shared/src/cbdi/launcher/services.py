@@ -64,7 +64,8 @@ def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
     """Return the world's arguments: the map, the simulator and its options, the run
     settings, agents and members."""
     run = scenario.run
-    args = ["--map", path_of(scenario.map_path), "--speed", str(run.speed)]
+    args = ["--map", path_of(scenario.map_path)] if scenario.map_path is not None else []
+    args += ["--speed", str(run.speed)]
     args += ["--seed", str(run.seed)]
     if run.until == "done":
         args += ["--max-time", str(run.max_time), "--stop-when-done"]
