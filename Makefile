@@ -47,8 +47,8 @@ test: venv system-tools
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 lint: venv
-	$(BIN)/ruff check shared services domains tests benchmarks
-	$(BIN)/mypy --strict shared/src/cbdi
+	$(BIN)/ruff check shared services domains tests benchmarks docs/tutorial
+	$(BIN)/mypy --strict shared/src/cbdi docs/tutorial/robot.py
 	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src domains/courier/src
 
 bench: venv

@@ -1,0 +1,68 @@
+"""The tidying robot's own code: a performer for `carry` and a sensor for `on`.
+
+`Room` stands in for your robot's API; the rest is what you write for a real one.
+Run: python robot.py [ROUTER_ENDPOINT]
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import sys
+
+from cbdi.bus import BusConfig, open_bus
+from cbdi.performer import ActionCall, Outcome, serve_performer
+from cbdi.sensor import Prototype, run_sensor
+
+
+class Room:
+    """Where each thing lies (your robot's API would look, grasp and move)."""
+
+    def __init__(self) -> None:
+        self.where = {"cup": "table"}
+
+
+class Carry:
+    """Performs (carry ?robot ?thing ?from ?to)."""
+
+    def __init__(self, room: Room) -> None:
+        self.room = room
+
+    async def perform(self, call: ActionCall) -> Outcome:
+        _robot, thing, here, there = call.args
+        if self.room.where.get(thing) != here:
+            return Outcome.failure(f"no {thing} on the {here}")
+        del self.room.where[thing]  # picked up
+        print(f"carrying the {thing} from the {here} to the {there}", flush=True)
+        await asyncio.sleep(call.duration)  # on its way (here: as long as planned)
+        self.room.where[thing] = there
+        print(f"put the {thing} on the {there}", flush=True)
+        return Outcome.success()
+
+
+class Things:
+    """Senses (on ?thing ?place): what lies where, as the robot sees it."""
+
+    prototype = Prototype("on", 2)
+
+    def __init__(self, room: Room) -> None:
+        self.room = room
+
+    async def read(self) -> list[tuple[str, ...]]:
+        return list(self.room.where.items())
+
+
+async def main(router: str) -> None:
+    room = Room()
+    bus = await open_bus(BusConfig(connect=(router,), connect_timeout=60.0))
+    try:
+        async with asyncio.TaskGroup() as tasks:
+            tasks.create_task(serve_performer(bus, "robot1", "carry", Carry(room)))
+            tasks.create_task(run_sensor(bus, "robot1", Things(room), rate=4.0))
+    finally:
+        await bus.close()
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C: the bus is closed, then exit
+        asyncio.run(main(sys.argv[1] if len(sys.argv) > 1 else "tcp/127.0.0.1:7447"))
