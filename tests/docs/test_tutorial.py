@@ -147,6 +147,7 @@ def test_the_tutorial_runs_as_shown(tmp_path: Path) -> None:
     )
     assert inspected.returncode == 0, inspected.stderr
     assert missing(inspect_out, inspected.stdout) == [], inspected.stdout
+    assert "agent robot1: failed=0 requests=1 first action at t=" in inspected.stdout  # the carry
 
     recorded = list(read_messages(argv(inspect_cmd, port, tmp_path)[-1]))
     # The sensor told the agent where the cup is, and was heard.

@@ -108,7 +108,7 @@ def _account(report: Inspection, m: RecordedMessage, now: float) -> float:
         return tick.time
     if m.schema == "cbdi.world.ActionOutcome/1":
         _outcome(_agent(report, (o := decode(m.payload, ActionOutcome, m.key)).agent), o)
-    elif m.key == ACT_REQUEST and m.schema == "cbdi.world.ActionRequest/1":
+    elif m.schema == "cbdi.world.ActionRequest/1" and _action_request(m.key):
         agent = _agent(report, decode(m.payload, ActionRequest, m.key).agent)
         agent.requests += 1
         if agent.first_action_time is None:
@@ -121,6 +121,12 @@ def _account(report: Inspection, m: RecordedMessage, now: float) -> float:
     else:
         _agent_message(report, m)
     return now
+
+
+def _action_request(key: str) -> bool:
+    """Whether `key` mirrors an action request: to the world, or to a performer."""
+    performer = key.startswith("cbdi/trace/") and "/performer/rpc/" in key
+    return key == ACT_REQUEST or (performer and key.endswith("/request"))
 
 
 def _agent_message(report: Inspection, m: RecordedMessage) -> None:

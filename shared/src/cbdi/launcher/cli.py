@@ -289,7 +289,7 @@ def _report(summary: RunSummary, as_json: bool) -> None:
     for member, epochs in summary.stalls.items():
         print(f"  {member}: missed the ack timeout in {epochs} epochs", file=sys.stderr)
     for name, counts in summary.stats.get("agents", {}).items():
-        text = " ".join(f"{k}={v}" for k, v in counts.items())
+        text = " ".join(f"{k}={v}" for k, v in counts.items() if v)  # what happened
         acts = summary.actions.get(name)
         if acts:
             text += f" actions={acts['actions']} first_action_at={acts['first_action']}"
