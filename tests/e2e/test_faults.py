@@ -229,3 +229,50 @@ def test_a_finished_world_stops_after_lingering(tmp_path: Path, router: str, spa
     assert world.popen.returncode == 0
     assert "event=finished reason=time_limit" in world.output()
     assert "event=lingered" in world.output()
+
+
+@pytest.mark.timeout(300)
+def test_a_killed_recorder_keeps_what_it_recorded_and_its_restart_goes_on(
+    tmp_path: Path,
+) -> None:
+    """SIGKILL of the monitor: nothing it recorded is lost (it flushes twice a second and
+    the reader takes a file with no footer up to its last record), the restarted monitor
+    goes on in the next part (`run-001.mcap`) instead of overwriting, and the readers read
+    the parts as one recording. What was published while no monitor ran is missing."""
+    rec = tmp_path / "run.mcap"
+    log = tmp_path / "up.log"
+    up = _up(log, "--speed", "2", "--record", str(rec))
+    try:
+        acting = re.compile(r"event=act epoch=(?:[89]|[1-9]\d) ")
+        wait_for(lambda: acting.search(log.read_text()), timeout=120, what="an act at epoch 8+")
+        time.sleep(1.0)  # a flush or two of the epochs so far
+        os.kill(_started(log)["monitor"], signal.SIGKILL)
+        out, _ = up.communicate(timeout=240)
+    finally:
+        up.kill()
+    text = log.read_text()
+    summary = json.loads(out)
+    assert "restarting service=monitor exit_code=-9 restart=1" in text
+    assert up.returncode == 0 and summary["result"] == "done", text[-3000:]
+    assert rec.exists() and (tmp_path / "run-001.mcap").exists()
+    from cbdi.wire import decode
+    from cbdi.wire.world import Tick
+    from cbdi_monitor.reader import read_messages
+
+    def epochs(path: Path) -> list[int]:
+        return [decode(m.payload, Tick).epoch for m in read_messages(path, ["cbdi/world/clock"])]
+
+    first = epochs(rec)
+    # The killed recorder's file alone (its part moved aside): epoch 0 on, none missing.
+    (tmp_path / "run-001.mcap").rename(tmp_path / "later.mcap")
+    before = epochs(rec)
+    (tmp_path / "later.mcap").rename(tmp_path / "run-001.mcap")
+    assert before[0] == 0 and before == list(range(len(before))) and len(before) >= 8, before
+    after = first[len(before) :]
+    assert after and after == list(range(after[0], after[0] + len(after))), after
+    assert after[-1] == summary["epochs"]  # the restarted recorder saw the run to its end
+    print("recorded epochs", before[0], "..", before[-1], "then", after[0], "..", after[-1])
+    inspected = subprocess.run(
+        [CBDI, "inspect", str(rec)], capture_output=True, text=True, timeout=120
+    )
+    assert inspected.returncode == 0 and "result: done" in inspected.stdout, inspected.stderr

@@ -47,7 +47,42 @@ def test_rotation_by_duration_splits_files(tmp_path: Path) -> None:
         rec.write("cbdi/world/clock", tick(i), log_ns=S * i)
     rec.close()
     assert [p.name for p in rec.files] == ["run.mcap", "run-001.mcap", "run-002.mcap"]
-    assert sum(1 for f in rec.files for _ in read_messages(f)) == 6
+    assert [m.log_ns for m in read_messages(tmp_path / "run.mcap")] == [S * i for i in range(6)]
+
+
+def _killed(rec: McapRecorder) -> None:
+    """Leave `rec` as a recorder killed outright leaves its file: flushed, not finished."""
+    rec.flush()
+    assert rec._stream is not None
+    rec._stream.flush()
+    rec._stream, rec._writer = None, None  # no footer is ever written
+
+
+def test_a_killed_recorder_loses_nothing_it_flushed_and_its_restart_goes_on(
+    tmp_path: Path,
+) -> None:
+    base = tmp_path / "run.mcap"
+    first = McapRecorder(base)
+    for i in range(5):
+        first.write("cbdi/world/clock", tick(i), log_ns=S * i)
+    _killed(first)
+    assert [m.log_ns for m in read_messages(base)] == [S * i for i in range(5)]
+    again = McapRecorder(base, resume=True)  # the restart: never overwrites
+    for i in range(5, 9):
+        again.write("cbdi/world/clock", tick(i), log_ns=S * i)
+    again.close()
+    assert [p.name for p in again.files] == ["run-001.mcap"]
+    assert [m.log_ns for m in read_messages(base)] == [S * i for i in range(9)]
+    # A file cut in the middle of a record reads up to the cut.
+    data = base.read_bytes()
+    base.write_bytes(data[: len(data) - 7])
+    assert [m.log_ns for m in read_messages(base)][-4:] == [S * i for i in range(5, 9)]
+    # A new recording replaces the file and drops the earlier one's parts.
+    fresh = McapRecorder(base)
+    fresh.write("cbdi/world/clock", tick(0), log_ns=S * 42)
+    fresh.close()
+    assert not (tmp_path / "run-001.mcap").exists()
+    assert [m.log_ns for m in read_messages(base)] == [S * 42]
 
 
 def test_schemas_are_known_by_name() -> None:

@@ -3,7 +3,13 @@
 Each channel's metadata names the agent, the component, the stream and the schema of
 its messages; the schema record carries the message's JSON Schema. Files are chunked and
 zstd-compressed, and rotate by size or duration when asked (`run.mcap`, `run-001.mcap`,
-...). `close()` must run for the file to be readable: the service calls it on SIGTERM.
+...). `close()` finishes a file (summary and footer); `flush()`, which the service calls
+twice a second, writes what was recorded so far, so a recorder killed outright loses at
+most the last half second: readers take a file with no footer up to its last record.
+
+A new recording replaces the file and its parts of an earlier one; a recorder restarted
+within the run (`resume`) never overwrites: it goes on in the next free part, and the
+readers (`cbdi_monitor.reader`) read a recording's parts in order as one.
 
 Traffic that is no cbdi message (garbage a client sent, mirrored on the trace keys) is
 recorded only in part, so a flood of it cannot grow the file without limit: the first
@@ -13,6 +19,7 @@ GARBAGE_PER_KEY samples per key and GARBAGE_TOTAL in all; the rest is counted in
 
 from __future__ import annotations
 
+import glob
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
@@ -22,11 +29,23 @@ from mcap.writer import CompressionType, Writer
 from cbdi import keys
 from cbdi_monitor.schemas import json_schema, peek_schema, wire_classes
 
-__all__ = ["ENCODING", "McapRecorder", "Rotation"]
+__all__ = ["ENCODING", "McapRecorder", "Rotation", "part_path", "part_paths"]
 
 ENCODING = "msgpack"
 GARBAGE_PER_KEY = 10  # samples without a known schema recorded per key
 GARBAGE_TOTAL = 1000  # and in all
+
+
+def part_path(base: Path, index: int) -> Path:
+    """The file of part `index` of the recording `base` (0: `base` itself)."""
+    return base if index == 0 else base.with_name(f"{base.stem}-{index:03d}{base.suffix}")
+
+
+def part_paths(base: Path) -> list[Path]:
+    """The recording `base` and its parts that exist, in order (`base` first, even when
+    it does not exist, so that reading it says so)."""
+    parts = sorted(base.parent.glob(f"{glob.escape(base.stem)}-[0-9][0-9][0-9]{base.suffix}"))
+    return [base, *parts]
 
 
 @dataclass(frozen=True)
@@ -46,8 +65,10 @@ class McapRecorder:
         rotation: Rotation | None = None,
         chunk_size: int = 256 * 1024,
         profile: str = "cbdi",
+        resume: bool = False,
     ) -> None:
         self.base = Path(path)
+        self.resume = resume  # a restart within the run: go on in the next free part
         self.rotation = rotation or Rotation()
         self.chunk_size = chunk_size
         self.profile = profile
@@ -65,12 +86,14 @@ class McapRecorder:
         self.dropped: dict[str, int] = {}  # and beyond the limits, not recorded
 
     def _open(self, log_ns: int) -> Writer:
+        if not self.files and not self.resume:
+            for old in part_paths(self.base)[1:]:  # an earlier recording's parts
+                old.unlink(missing_ok=True)
         index = len(self.files)
-        path = (
-            self.base
-            if index == 0
-            else self.base.with_name(f"{self.base.stem}-{index:03d}{self.base.suffix}")
-        )
+        path = part_path(self.base, index)
+        while self.resume and path.exists():
+            index += 1
+            path = part_path(self.base, index)
         path.parent.mkdir(parents=True, exist_ok=True)
         self._stream = path.open("wb")
         writer = Writer(self._stream, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
@@ -142,6 +165,11 @@ class McapRecorder:
         self.garbage[key] = here + 1
         self._garbage_total += 1
         return True
+
+    def flush(self) -> None:
+        """Write what was recorded so far (the chunk in progress) to the file."""
+        if self._writer is not None:
+            self._writer.flush()
 
     def finish_file(self) -> None:
         """Finish the current file (summary, index, footer) so it is readable."""

@@ -36,6 +36,16 @@ class MonitorSettings(ServiceSettings):
     rotate_mb: float = field(default=0.0, metadata={"help": "start a new file every N MB"})
     rotate_seconds: float = field(default=0.0, metadata={"help": "new file every N seconds"})
     drain: float = field(default=0.3, metadata={"help": "seconds to drain in-flight at stop"})
+    flush_every: float = field(
+        default=0.5, metadata={"help": "write what was recorded every N wall s (0: at chunks)"}
+    )
+    restart: int = field(
+        default=0,
+        metadata={
+            "help": "restarts so far (cbdi up sets CBDI_RESTART): above 0 the recording goes "
+            "on in its next part instead of replacing the file"
+        },
+    )
 
 
 class Monitor:
@@ -62,6 +72,13 @@ class Monitor:
                 messages=sum(self.recorder.counts.values()),
                 garbage_dropped=sum(self.recorder.dropped.values()),
             )
+
+    async def flush(self, every: float) -> None:
+        """Write what was recorded every `every` wall seconds: a recorder killed outright
+        loses no more than that (its file is read up to its last record)."""
+        while not self.recorder.closed:
+            await asyncio.sleep(every)
+            self.recorder.flush()
 
     async def drain_rest(self, it: object) -> None:
         """Write what is queued or still arriving until `drain` s pass with nothing new."""
@@ -113,10 +130,14 @@ def monitor_main(settings: MonitorSettings) -> ServiceMain:
         rotation = Rotation(
             max_bytes=int(settings.rotate_mb * 1e6), max_seconds=settings.rotate_seconds
         )
-        monitor = Monitor(ctx, McapRecorder(settings.output, rotation), settings.drain)
+        resume = settings.restart > 0
+        recorder = McapRecorder(settings.output, rotation, resume=resume)
+        monitor = Monitor(ctx, recorder, settings.drain)
         sub = ctx.bus.subscribe(ALL)
         ctx.start(monitor.record(sub), name="record")
+        if settings.flush_every > 0:
+            ctx.start(monitor.flush(settings.flush_every), name="flush")
         ctx.start(monitor.health(ctx.bus.watch_alive(keys.ALIVE_ALL)), name="health")
-        ctx.log.info("recording", output=settings.output)
+        ctx.log.info("recording", output=settings.output, resume=resume)
 
     return body

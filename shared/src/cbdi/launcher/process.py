@@ -20,6 +20,7 @@ __all__ = ["ManagedProcess", "ProcessSpec", "RestartPolicy"]
 
 RESTART_POLICIES = ("never", "on-failure", "always")
 EXIT_BAD_CONFIG = 2  # what every cbdi service exits with on bad settings or input files
+RESTART_ENV = "CBDI_RESTART"
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,10 @@ class ManagedProcess:
 
     async def start(self) -> None:
         """Start the process (again)."""
-        env = {**os.environ, **self.spec.env, **child_env()}
+        # CBDI_RESTART: how many times it was restarted (0 at first), so a service can
+        # tell a restart within the run from a new run (a recorder continues its file).
+        restart = {RESTART_ENV: str(self.restarts)}
+        env = {**os.environ, **self.spec.env, **child_env(), **restart}
         self.proc = await asyncio.create_subprocess_exec(
             *self.spec.argv,
             stdin=asyncio.subprocess.DEVNULL,
