@@ -45,7 +45,7 @@ def test_the_courier_domain_runs_without_the_recycling_package(tmp_path: Path) -
     grid = REPO / "domains/recycling/maps/paper-7x7.toml"
     world = run(venv / "bin/cbdi-world", "--simulator", "recycling", "--map", grid, cwd=tmp_path)
     assert world.returncode == 2
-    assert "no simulator 'recycling' (installed: courier)" in world.stderr
+    assert "no simulator 'recycling' (installed: clock, courier)" in world.stderr
 
     scenario = REPO / "domains/courier/scenarios/courier.toml"
     up = [venv / "bin/cbdi", "up", scenario, "--lockstep", "--json", "--quiet"]

@@ -90,7 +90,7 @@ def test_a_simulator_that_is_not_installed_is_named_with_those_that_are(tmp_path
     with pytest.raises(
         CbdiError,
         match=r"run.simulator: simulator: no simulator 'warehouse' "
-        r"\(installed: courier, recycling\)",
+        r"\(installed: clock, courier, recycling\)",
     ):
         load_scenario(path)
 
