@@ -203,3 +203,21 @@ async def test_the_executor_survives_fuzzing() -> None:
         pass  # alive and no handler crashed (checked by `fuzz` and `alone`)
 
     await fuzz(shell, check)
+
+
+async def test_the_monitor_survives_fuzzing_and_its_recording_reads(tmp_path: Any) -> None:
+    from cbdi_monitor.reader import read_messages
+    from cbdi_monitor.service import MonitorSettings, monitor_main
+
+    output = tmp_path / "fuzz.mcap"
+    monitor_settings = MonitorSettings(output=str(output))
+    shell = TogetherService("monitor", monitor_settings, monitor_main(monitor_settings))
+    async with alone(shell) as (bus, ctx):
+        for i, payload in enumerate(payloads()):
+            await bus.publish(STREAMS[i % len(STREAMS)], payload)
+            if i % 50 == 0:
+                await asyncio.sleep(0.01)
+        await asyncio.sleep(0.5)
+        assert ctx.counters["handler_crash"] == 0
+    recorded = list(read_messages(output))  # finished at stop: every file part reads
+    assert len(recorded) >= len(payloads()) // 2, len(recorded)
