@@ -6,10 +6,13 @@
   stops), reported in the launcher's log and on the bus (recorded by the monitor), killed
   and restarted; the run still recycles everything.
 - A world whose run ended stops on its own after `--linger`, launcher or not.
-- SIGKILL of an agent's planner, scheduler or executor mid-run (lockstep): the launcher
-  restarts it, the restarted service joins at the epoch under way (`Lockstep.rejoin`)
-  and the run goes on with no ack timeout: no stalled epoch, everything recycled, the
-  mission at most 10 epochs longer than the undisturbed run's.
+- SIGKILL of an agent's planner or executor, or of the router, mid-run (lockstep): the
+  launcher restarts it, a restarted agent service joins at the epoch under way
+  (`Lockstep.rejoin`), what was sent while the router was down is recovered, and the
+  run goes on with no ack timeout: no stalled epoch, everything recycled, the mission
+  within 5 epochs of the undisturbed run's, and the recording holds every epoch.
+- SIGKILL of the monitor: the restart goes on in a new part and recovers what was sent
+  meanwhile; the parts hold every epoch once.
 
 Timings are generous bounds, not measurements: these pass on a loaded machine.
 """
@@ -172,16 +175,20 @@ UNDISTURBED: dict[str, float] = {}
 @pytest.mark.timeout(400)
 # The scheduler case is left out: in 1 of about 14 runs its restart still met an ack
 # timeout (see the session note); the executor and planner cases never did.
-@pytest.mark.parametrize("service", ["robot1/executor", "robot1/planner"])
-def test_a_killed_agent_service_rejoins_at_once_and_the_run_completes(
+@pytest.mark.parametrize("service", ["robot1/executor", "robot1/planner", "router"])
+def test_a_killed_service_is_restarted_and_the_run_completes_as_undisturbed(
     tmp_path: Path, service: str
 ) -> None:
+    """An agent's service rejoins at the epoch under way; a killed router loses nothing:
+    what was published while it was down is recovered from the publishers' caches once
+    the sessions are back (Zenoh advanced pub/sub), so no gate waits for it."""
     if not UNDISTURBED:
         plain = _up(tmp_path / "plain.log", "--quiet")
         out, _ = plain.communicate(timeout=300)
         UNDISTURBED.update(sim_time=json.loads(out)["sim_time"])
     log = tmp_path / "up.log"
-    up = _up(log, env={"CBDI_ACK_TIMEOUT": "60"})
+    rec = tmp_path / "run.mcap"
+    up = _up(log, "--record", str(rec), env={"CBDI_ACK_TIMEOUT": "60"})
     try:
         acting = re.compile(r"event=act epoch=(?:[89]|[1-9]\d) ")
         wait_for(lambda: acting.search(log.read_text()), timeout=120, what="an act at epoch 8+")
@@ -195,12 +202,21 @@ def test_a_killed_agent_service_rejoins_at_once_and_the_run_completes(
     assert up.returncode == 0 and summary["result"] == "done", text[-3000:]
     assert summary["stats"]["litter_recycled"] == 3
     assert "ack_timeout" not in text and not any(summary["stalls"].values()), text[-3000:]
-    # The fault costs a few epochs, not an ack timeout (60 s here). The restart plans
-    # afresh from where the robot is, which may be better or worse than the plan it lost:
-    # seed 1 takes 50 s undisturbed; 12 runs with a service killed at epoch 8 or so took
-    # 42 to 55 s. The bound leaves room for where on a loaded machine the kill lands.
+    assert "upstream_late" not in text, text[-3000:]
+    # The fault costs a few epochs, not an ack timeout (60 s here). A restarted agent
+    # service plans afresh from where the robot is, which may be better or worse than
+    # the plan it lost (seed 1 takes 50 s undisturbed; 12 runs with a service killed at
+    # epoch 8 or so took 42 to 55 s); after a router restart every service's liveliness
+    # token comes back, which the scheduler takes for an executor restart (52 s).
     print(service, "mission", summary["sim_time"], "undisturbed", UNDISTURBED["sim_time"])
-    assert summary["sim_time"] <= UNDISTURBED["sim_time"] + 10.0
+    # Costs at most 5 epochs (a replan from where the robot is may also save some).
+    assert summary["sim_time"] <= UNDISTURBED["sim_time"] + 5.0
+    from cbdi.wire import decode
+    from cbdi.wire.world import Tick
+    from cbdi_monitor.reader import read_messages
+
+    ticks = [decode(m.payload, Tick).epoch for m in read_messages(rec, ["cbdi/world/clock"])]
+    assert ticks == list(range(summary["epochs"] + 1)), ticks  # every epoch, once
 
 
 def test_a_finished_world_stops_after_lingering(tmp_path: Path, router: str, spawn: object) -> None:
@@ -238,7 +254,8 @@ def test_a_killed_recorder_keeps_what_it_recorded_and_its_restart_goes_on(
     """SIGKILL of the monitor: nothing it recorded is lost (it flushes twice a second and
     the reader takes a file with no footer up to its last record), the restarted monitor
     goes on in the next part (`run-001.mcap`) instead of overwriting, and the readers read
-    the parts as one recording. What was published while no monitor ran is missing."""
+    the parts as one recording. What was published while no monitor ran is recovered from
+    the publishers' caches (history), each message once: every epoch is in the file."""
     rec = tmp_path / "run.mcap"
     log = tmp_path / "up.log"
     up = _up(log, "--speed", "2", "--record", str(rec))
@@ -262,16 +279,17 @@ def test_a_killed_recorder_keeps_what_it_recorded_and_its_restart_goes_on(
     def epochs(path: Path) -> list[int]:
         return [decode(m.payload, Tick).epoch for m in read_messages(path, ["cbdi/world/clock"])]
 
-    first = epochs(rec)
+    whole = epochs(rec)
     # The killed recorder's file alone (its part moved aside): epoch 0 on, none missing.
     (tmp_path / "run-001.mcap").rename(tmp_path / "later.mcap")
     before = epochs(rec)
     (tmp_path / "later.mcap").rename(tmp_path / "run-001.mcap")
     assert before[0] == 0 and before == list(range(len(before))) and len(before) >= 8, before
-    after = first[len(before) :]
-    assert after and after == list(range(after[0], after[0] + len(after))), after
-    assert after[-1] == summary["epochs"]  # the restarted recorder saw the run to its end
-    print("recorded epochs", before[0], "..", before[-1], "then", after[0], "..", after[-1])
+    # The two parts: every epoch of the run, once, in order.
+    assert whole == list(range(summary["epochs"] + 1)), whole
+    recovered = re.findall(r"event=recorded .*recovered=(\d+) already_recorded=(\d+)", text)
+    print("recorded epochs 0 ..", before[-1], "then the rest; recovered, skipped:", recovered)
+    assert recovered and int(recovered[-1][0]) > 0, text[-3000:]
     inspected = subprocess.run(
         [CBDI, "inspect", str(rec)], capture_output=True, text=True, timeout=120
     )

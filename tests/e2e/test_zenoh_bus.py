@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 
 import pytest
 
@@ -87,3 +88,50 @@ async def test_no_router_is_a_clear_error() -> None:
     cfg = BusConfig(connect=(f"tcp/127.0.0.1:{free_port()}",), connect_timeout=0.5)
     with pytest.raises(ConfigError, match="cannot join Zenoh"):
         await open_bus(cfg)
+
+
+async def test_what_is_published_while_the_router_is_down_arrives_after_its_restart(
+    spawn: object,
+) -> None:
+    """Advanced pub/sub: a subscriber recovers, in order, what a publisher sent while the
+    router was killed (including the last samples, with nothing sent after them); a
+    subscriber that joins later gets none of what was sent before it joined, and a
+    subscription with history gets that too."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+
+    def start_router() -> object:
+        proc = spawn("router", "cbdi", "router", "--listen", endpoint)  # type: ignore[operator]
+        for _ in range(300):
+            if "event=ready" in proc.output():
+                return proc
+            time.sleep(0.05)
+        raise AssertionError(proc.output())
+
+    first = start_router()
+    cfg = BusConfig(connect=(endpoint,), connect_timeout=30)
+    a, b = await open_bus(cfg), await open_bus(cfg)
+    try:
+        sub = b.subscribe("cbdi/test/**")
+        await asyncio.sleep(0.5)
+        for i in range(10):
+            await a.publish("cbdi/test/x", bytes([i]), block=True)
+        it = aiter(sub)
+        got = [(await asyncio.wait_for(anext(it), 10)).payload[0] for _ in range(10)]
+        first.popen.kill()  # type: ignore[attr-defined]
+        first.popen.wait()  # type: ignore[attr-defined]
+        await asyncio.sleep(0.5)
+        for i in range(10, 20):  # into the void: no router
+            await a.publish("cbdi/test/x", bytes([i]), block=True)
+        start_router()
+        got += [(await asyncio.wait_for(anext(it), 30)).payload[0] for _ in range(10)]
+        assert got == list(range(20))
+        late = b.subscribe("cbdi/test/**")
+        past = b.subscribe("cbdi/test/**", history=True)
+        await asyncio.sleep(1.5)  # a recovery period or three
+        await a.publish("cbdi/test/x", bytes([20]), block=True)
+        assert (await asyncio.wait_for(anext(aiter(late)), 10)).payload[0] == 20
+        history = [(await asyncio.wait_for(anext(aiter(past)), 10)).payload[0] for _ in range(21)]
+        assert history == list(range(21))
+    finally:
+        await a.close()
+        await b.close()

@@ -13,6 +13,7 @@ from cbdi_monitor import export, inspect, view
 from cbdi_monitor.inspect import inspect_messages
 from cbdi_monitor.reader import RecordingError, read_messages
 from cbdi_monitor.recorder import GARBAGE_PER_KEY, GARBAGE_TOTAL, McapRecorder, Rotation
+from cbdi_monitor.resume import recorded_before
 from cbdi_monitor.schemas import json_schema, peek_schema, wire_classes
 
 S = 1_000_000_000
@@ -83,6 +84,28 @@ def test_a_killed_recorder_loses_nothing_it_flushed_and_its_restart_goes_on(
     fresh.close()
     assert not (tmp_path / "run-001.mcap").exists()
     assert [m.log_ns for m in read_messages(base)] == [S * 42]
+
+
+def test_a_restart_knows_what_the_killed_recorder_wrote(tmp_path: Path) -> None:
+    """The history a restarted recorder gets holds what the earlier parts have: those are
+    skipped; what is newer on a key, or a restarted sender's (counting afresh, later),
+    is not; unreadable earlier parts are reported, not fatal."""
+    base = tmp_path / "run.mcap"
+    first = McapRecorder(base)
+    for i in range(5):
+        first.write("cbdi/world/clock", tick(i), log_ns=S * i, publish_ns=S * i, seq=i + 1)
+    _killed(first)
+    done, why = recorded_before(base)
+    assert not why and done.latest == {"cbdi/world/clock": (4 * S, 5)}
+    assert done.has("cbdi/world/clock", 3 * S, 4) and done.has("cbdi/world/clock", 4 * S, 5)
+    assert not done.has("cbdi/world/clock", 5 * S, 6)  # sent while no recorder ran
+    assert not done.has("cbdi/world/clock", 6 * S, 1)  # a restarted sender
+    assert not done.has("cbdi/other", S, 1)
+    assert done.skipped == 2
+    assert recorded_before(tmp_path / "none.mcap")[0].latest == {}
+    base.write_bytes(b"not an MCAP file at all")
+    nothing, why = recorded_before(base)
+    assert nothing.latest == {} and "not a readable MCAP file" in why
 
 
 def test_schemas_are_known_by_name() -> None:

@@ -21,6 +21,7 @@ from cbdi.runtime.service import ServiceMain
 from cbdi.wire.base import encode
 from cbdi.wire.common import Liveliness, ServiceHealth
 from cbdi_monitor.recorder import McapRecorder, Rotation
+from cbdi_monitor.resume import Recorded, recorded_before
 
 __all__ = ["MonitorSettings", "monitor_main"]
 
@@ -51,9 +52,19 @@ class MonitorSettings(ServiceSettings):
 class Monitor:
     """Glue between the bus and one `McapRecorder`."""
 
-    def __init__(self, ctx: ServiceContext, recorder: McapRecorder, drain: float) -> None:
+    def __init__(
+        self,
+        ctx: ServiceContext,
+        recorder: McapRecorder,
+        drain: float,
+        before: Recorded | None = None,
+    ) -> None:
         self.ctx, self.recorder, self.drain = ctx, recorder, drain
         self.alive: set[str] = set()
+        # A restart: what the earlier parts hold, and when this recorder began (samples
+        # sent before are history, logged at their publish time, in their place).
+        self.before = before
+        self.began_ns = time.time_ns()
 
     async def record(self, sub: Subscription) -> None:
         """Write every sample; on stop, drain what is still arriving, then finish the file."""
@@ -71,6 +82,8 @@ class Monitor:
                 files=",".join(map(str, self.recorder.files)),
                 messages=sum(self.recorder.counts.values()),
                 garbage_dropped=sum(self.recorder.dropped.values()),
+                recovered=self.ctx.counters["recovered"],
+                already_recorded=self.before.skipped if self.before else 0,
             )
 
     async def flush(self, every: float) -> None:
@@ -93,8 +106,14 @@ class Monitor:
     def write(self, sample: Sample) -> None:
         if keys.is_heartbeat(sample.key):
             return
+        log_ns = time.time_ns()
+        if self.before is not None and 0 < sample.sent_ns < self.began_ns:
+            if self.before.has(sample.key, sample.sent_ns, sample.seq):
+                return
+            log_ns = sample.sent_ns  # recovered: sent while no recorder ran
+            self.ctx.counters["recovered"] += 1
         written = self.recorder.write(
-            sample.key, sample.payload, time.time_ns(), sample.sent_ns, sample.seq
+            sample.key, sample.payload, log_ns, sample.sent_ns, sample.seq
         )
         if not written and not self.recorder.closed:
             dropped = sum(self.recorder.dropped.values())
@@ -131,13 +150,25 @@ def monitor_main(settings: MonitorSettings) -> ServiceMain:
             max_bytes=int(settings.rotate_mb * 1e6), max_seconds=settings.rotate_seconds
         )
         resume = settings.restart > 0
+        before = None
+        if resume:  # subscribe first: what is sent while the parts are read waits
+            sub = ctx.bus.subscribe(ALL, history=True)
+            before, why = recorded_before(settings.output)
+            if why:
+                ctx.log.warning("earlier_parts_unreadable", output=settings.output, reason=why)
+        else:
+            sub = ctx.bus.subscribe(ALL)
         recorder = McapRecorder(settings.output, rotation, resume=resume)
-        monitor = Monitor(ctx, recorder, settings.drain)
-        sub = ctx.bus.subscribe(ALL)
+        monitor = Monitor(ctx, recorder, settings.drain, before)
         ctx.start(monitor.record(sub), name="record")
         if settings.flush_every > 0:
             ctx.start(monitor.flush(settings.flush_every), name="flush")
         ctx.start(monitor.health(ctx.bus.watch_alive(keys.ALIVE_ALL)), name="health")
-        ctx.log.info("recording", output=settings.output, resume=resume)
+        ctx.log.info(
+            "recording",
+            output=settings.output,
+            resume=resume,
+            recorded_before=len(before.latest) if before else 0,
+        )
 
     return body

@@ -69,11 +69,13 @@ class Bus(Protocol):
         """Publish `payload` on `key`; `block` (commands, plans) never drops under load."""
         ...
 
-    def subscribe(self, key_expr: str | Sequence[str]) -> Subscription:
+    def subscribe(self, key_expr: str | Sequence[str], *, history: bool = False) -> Subscription:
         """Subscribe to one or several key expressions (wildcards allowed) in one queue.
 
         Samples of all of them arrive in one stream, in the order they were received, and
-        wait in the queue until iterated; nothing is dropped.
+        wait in the queue until iterated; nothing is dropped. With `history`, samples
+        published before the subscription that publishers still hold (their recovery
+        caches) come first: what a restarted recorder missed.
         """
         ...
 

@@ -110,7 +110,10 @@ class MemoryBus:
             if any(_matches(expr, key) for expr in sub.key_exprs):
                 sub.queue.put_nowait(sample)
 
-    def subscribe(self, key_expr: str | Sequence[str]) -> _MemorySubscription:
+    def subscribe(
+        self, key_expr: str | Sequence[str], *, history: bool = False
+    ) -> _MemorySubscription:
+        # `history`: nothing is lost in memory, and a subscription starts with what comes.
         self._check()
         exprs = [key_expr] if isinstance(key_expr, str) else key_expr
         sub = _MemorySubscription(self.network, exprs)

@@ -3,12 +3,22 @@
 Zenoh's Python API calls back on its own threads. Every callback here does one thing:
 hand the item to the asyncio loop with `call_soon_threadsafe`. The session is always
 closed in `close()` (an unclosed session with callback subscribers hangs at exit).
+
+Nothing published is lost while the router restarts: publications go out through
+Zenoh's advanced publishers (numbered, with a cache of the last `CACHE_SAMPLES` per
+key), and subscriptions are advanced subscribers that ask each publisher they heard
+from, twice a second, for what came after its last sample they have, and fetch what is
+missing from its cache once the network is back, in order. A subscription with
+`history` (a recorder's) also gets what every publisher still holds in its cache when
+it joins, so a restarted recorder gets what was sent while it was down. Heartbeats
+(wall-clock, many) are plain publications.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import datetime
 import json
 import struct
 import time
@@ -18,16 +28,20 @@ from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
 import zenoh
+import zenoh.ext
 from zenoh.handlers import Callback
 
 from cbdi.bus.base import AliveEvent, Handler, Sample
 from cbdi.errors import BusClosedError, ConfigError, RequestFailedError, RequestTimeoutError
+from cbdi.keys import is_heartbeat
 
 __all__ = ["BusConfig", "ZenohBus", "open_bus", "zenoh_config"]
 
 T = TypeVar("T")
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 _MAX_PUBLISHERS = 1024
+CACHE_SAMPLES = 256  # per key: what a subscriber can recover after an outage
+RECOVERY_PERIOD = datetime.timedelta(seconds=0.5)  # between a subscriber's "what next?"
 
 
 @dataclass(frozen=True)
@@ -57,6 +71,8 @@ def zenoh_config(cfg: BusConfig) -> zenoh.Config:
     # its pool (16 MB per session, mapped again by every session it reaches) would cost
     # each service some 20 to 64 MB of memory for nothing (`extra` turns it back on).
     conf.insert_json5("transport/shared_memory/enabled", "false")
+    # Advanced publishers' caches keep timestamped samples.
+    conf.insert_json5("timestamping/enabled", "true")
     if cfg.connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
     if cfg.listen:
@@ -165,7 +181,7 @@ class _Inbox(Generic[T]):
 class _ZenohSubscription:
     """One inbox fed by a Zenoh subscriber per key expression, in arrival order."""
 
-    def __init__(self, bus: ZenohBus, key_exprs: Sequence[str]) -> None:
+    def __init__(self, bus: ZenohBus, key_exprs: Sequence[str], history: bool) -> None:
         self.queue: _Inbox[Sample | None] = _Inbox(bus.loop)
         push = self.queue.push
 
@@ -174,8 +190,18 @@ class _ZenohSubscription:
             push(Sample(str(s.key_expr), s.payload.to_bytes(), seq, sent_ns, order))
 
         self._bus = bus
+        # Periodic queries, not heartbeats: a subscriber asks only the publishers it heard
+        # from for what came after their last sample it has; with heartbeats a new
+        # subscriber would fetch every cache (what was sent before it subscribed).
+        # (the stub says float; the binding wants a timedelta)
+        period: Any = RECOVERY_PERIOD
+        recovery = zenoh.ext.RecoveryConfig(periodic_queries=period, heartbeat=None)
+        past = zenoh.ext.HistoryConfig(detect_late_publishers=True) if history else None
         self._subs: list[Any] = [
-            bus.session.declare_subscriber(k, Callback(on_sample)) for k in key_exprs
+            zenoh.ext.declare_advanced_subscriber(
+                bus.session, k, Callback(on_sample), history=past, recovery=recovery
+            )
+            for k in key_exprs
         ]
         bus._closeables.add(self)
 
@@ -255,13 +281,29 @@ class ZenohBus:
             with contextlib.suppress(zenoh.ZError):
                 oldest.undeclare()
         cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
-        publisher = self.session.declare_publisher(key, congestion_control=cc)
+        publisher: Any
+        if is_heartbeat(key):
+            publisher = self.session.declare_publisher(key, congestion_control=cc)
+        else:
+            publisher = zenoh.ext.declare_advanced_publisher(
+                self.session,
+                key,
+                congestion_control=cc,
+                cache=zenoh.ext.CacheConfig(CACHE_SAMPLES),
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=None, sporadic_heartbeat=None
+                ),
+                publisher_detection=True,
+            )
         self._publishers[(key, block)] = publisher
         return publisher
 
-    def subscribe(self, key_expr: str | Sequence[str]) -> _ZenohSubscription:
+    def subscribe(
+        self, key_expr: str | Sequence[str], *, history: bool = False
+    ) -> _ZenohSubscription:
         self._check()
-        return _ZenohSubscription(self, [key_expr] if isinstance(key_expr, str) else key_expr)
+        exprs = [key_expr] if isinstance(key_expr, str) else key_expr
+        return _ZenohSubscription(self, exprs, history)
 
     async def request(self, key: str, payload: bytes, *, timeout: float = 2.0) -> bytes:
         self._check()
