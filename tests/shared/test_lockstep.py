@@ -82,6 +82,52 @@ async def test_the_world_is_released_up_to_the_agents_percepts() -> None:
     assert [type(m).__name__ for _, m in released.messages] == ["Tick", "Percepts"]
 
 
+async def test_the_percepts_wait_for_the_tick_and_outcomes_they_count() -> None:
+    """After a router restart the bus recovers each key on its own: the percepts (the
+    world's last message of the epoch) may come before the tick or an outcome they
+    count. The gate waits for those, releases them in the world's order, and leaves
+    the next epoch's for later; a late joiner takes the counts it never saw as had."""
+    from cbdi.wire.world import ActionOutcome
+
+    clock, outcomes, percepts = (
+        "cbdi/world/clock",
+        "cbdi/world/outcomes/r1",
+        "cbdi/world/percepts/r1",
+    )
+    gate = EpochGate(["cbdi/world/clock", "cbdi/world/*/r1"])
+
+    def tick(e: int) -> Tick:
+        return Tick(epoch=e, time=float(e), epoch_duration=1.0, speed=0.0, lockstep=True)
+
+    def seen(e: int, sent: dict[str, int]) -> Percepts:
+        return Percepts(
+            agent="r1", epoch=e, time=float(e), position=(0, 0), depth=1,
+            free=[], blocked=[], items=[], holding=[], sent=sent,
+        )  # fmt: skip
+
+    done = ActionOutcome(
+        agent="r1", request_id="a", action="move", status="succeeded", reason="", epoch=1, time=1.0
+    )
+    await gate.put(item(clock, 1, 1, tick(0)))
+    await gate.put(item(percepts, 1, 2, seen(0, {clock: 1})))
+    assert gate.met(Need(WORLD, 0))
+    await gate.wait([Need(WORLD, 0)], timeout=1)
+    await gate.put(item(percepts, 2, 5, seen(1, {clock: 2, outcomes: 1})))  # came first
+    assert not gate.met(Need(WORLD, 1))
+    await gate.put(item(outcomes, 1, 4, done))
+    assert not gate.met(Need(WORLD, 1))
+    await gate.put(item(clock, 2, 3, tick(1)))
+    await gate.put(item(clock, 3, 6, tick(2)))  # epoch 2's: not covered
+    released = await gate.wait([Need(WORLD, 1)], timeout=1)
+    names = [type(m).__name__ for _, m in released.messages]
+    assert names == ["Tick", "ActionOutcome", "Percepts"] and not released.late
+    late = EpochGate(["cbdi/world/clock", "cbdi/world/*/r1"])
+    late.rebase, late.joined = True, 5
+    await late.put(item(clock, 6, 9, tick(5)))
+    await late.put(item(percepts, 6, 10, seen(5, {clock: 6, outcomes: 3})))
+    assert late.met(Need(WORLD, 5))
+
+
 async def test_a_late_sender_is_named_and_what_came_is_taken() -> None:
     gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
     await gate.put(item(BELIEFS, 1, 1, beliefs(0)))

@@ -96,6 +96,7 @@ class _Sender:
     received: dict[str, int] = field(default_factory=dict)  # highest seq per key
     acks: dict[tuple[int, int], EpochAck] = field(default_factory=dict)
     world_epoch: int = -1
+    world_sent: dict[int, dict[str, int]] = field(default_factory=dict)  # percepts' `sent`
 
 
 class EpochGate:
@@ -135,7 +136,14 @@ class EpochGate:
                 s.buffer.append(item)
                 s.received[key] = max(s.received.get(key, 0), seq)
                 if isinstance(msg, PERCEPTS):
+                    if self.rebase and WORLD not in self.based:
+                        self.based.add(WORLD)  # a late join: what it counted before is gone
+                        for k, n in msg.sent.items():
+                            s.received[k] = max(s.received.get(k, 0), n)
                     s.world_epoch = max(s.world_epoch, msg.epoch)
+                    s.world_sent.setdefault(msg.epoch, dict(msg.sent))
+                    for old in [e for e in s.world_sent if e < msg.epoch - 2]:
+                        del s.world_sent[old]
             self.changed.notify_all()
 
     def _ack(self, msg: EpochAck) -> None:
@@ -162,11 +170,20 @@ class EpochGate:
             return True
         s = self._of(need.sender)
         if need.sender == WORLD:
-            return s.world_epoch >= need.epoch
+            if s.world_epoch < need.epoch:
+                return False
+            sent = self._world_sent(need.epoch)
+            return all(s.received.get(k, 0) >= n for k, n in sent.items() if self.hears(k))
         ack = self._ack_for(need)
         if ack is None:
             return False
         return all(s.received.get(k, 0) >= n for k, n in ack.sent.items() if self.hears(k))
+
+    def _world_sent(self, epoch: int) -> dict[str, int]:
+        """The `sent` of the world's percepts of `epoch` (or the earliest later ones)."""
+        s = self._of(WORLD)
+        later = [e for e in s.world_sent if e >= epoch]
+        return s.world_sent[min(later)] if later else {}
 
     def hears(self, key: str) -> bool:
         """Whether this component subscribes to `key` (only those counts are waited for)."""
@@ -201,8 +218,14 @@ class EpochGate:
                 ),
                 len(s.buffer) if need.epoch < 0 else 0,
             )
-            head, s.buffer = s.buffer[:cut], s.buffer[cut:]
-            return [(i.key, i.message) for i in _in_order(head)]
+            # And what the percepts' `sent` covers that was recovered after them.
+            sent = self._world_sent(need.epoch) if need.epoch >= 0 else {}
+            head = s.buffer[:cut]
+            after = s.buffer[cut:]
+            covered = [i.seq and i.seq <= sent.get(i.key, 0) for i in after]
+            rest = [i for i, c in zip(after, covered, strict=True) if c]
+            s.buffer = [i for i, c in zip(after, covered, strict=True) if not c]
+            return [(i.key, i.message) for i in _in_order(head + rest)]
         if need.epoch < 0:  # the start: only what came before its `ready` (nothing, usually)
             ready = s.acks.get((-1, stage_rank("ready")))
             limit: dict[str, int] | None = dict(ready.sent) if ready is not None else {}
@@ -315,6 +338,8 @@ class Lockstep:
                 await self.gate.put(e)
         self.early = []
         self.gate.joined = tick.epoch
+        # A first tick past epoch 0: we joined late, what senders counted before is gone.
+        self.gate.rebase = self.gate.rebase or tick.epoch > 0
         self.start(tick.epoch)
         return []
 

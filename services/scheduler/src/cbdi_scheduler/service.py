@@ -20,6 +20,7 @@ from cbdi.bus import publish, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
+from cbdi.peers import Peers
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
@@ -178,39 +179,52 @@ class SchedulerService:
             with dropping(self.ctx, key, msg):
                 await self.on_message(msg)
 
-    async def watch_planner(self) -> None:
+    async def watch_peers(self) -> None:
+        """React to the agent's planner and executor (re)appearing (`on_planner`,
+        `on_executor`); not to one back with our own session (`cbdi.peers`): the bus
+        went, not they, and what was sent meanwhile is recovered."""
+        me = keys.alive(keys.service_id("scheduler", self.agent))
+        planner = keys.alive(keys.service_id("planner", self.agent))
+        executor = keys.alive(keys.service_id("executor", self.agent))
+        peers = Peers(me)
+        async for event in self.ctx.bus.watch_alive(keys.alive(keys.service_id("*", self.agent))):
+            appearance = peers.observe(event)
+            if appearance is None or event.key not in (planner, executor):
+                continue
+            if appearance == "reconnected":
+                self.ctx.log.info("bus_reconnected", peer=keys.service_of_alive(event.key))
+            elif event.key == planner:
+                await self.on_planner()
+            else:
+                await self.on_executor(again=appearance == "again")
+
+    async def on_planner(self) -> None:
         """Send the search in progress again when the planner appears: a request sent
         before it subscribed, or to a planner that restarted, would be lost. The next
         beliefs go whole (it missed the series)."""
-        token = keys.alive(keys.service_id("planner", self.agent))
-        async for event in self.ctx.bus.watch_alive(token):
-            if event.alive:
-                self.beliefs_out.resend()
-            if event.alive and self.last_search is not None:
-                self.ctx.log.info("search_resent", request=self.last_search.request_id)
-                key = keys.planner_requests(self.agent)
-                await publish(self.ctx.bus, key, self.last_search, block=True)
+        self.beliefs_out.resend()
+        if self.last_search is not None:
+            self.ctx.log.info("search_resent", request=self.last_search.request_id)
+            key = keys.planner_requests(self.agent)
+            await publish(self.ctx.bus, key, self.last_search, block=True)
 
-    async def watch_executor(self) -> None:
+    async def on_executor(self, again: bool) -> None:
         """Send the next beliefs whole when the executor (re)appears; one that comes
-        back lost the plan it had, so the intention is planned again."""
-        token = keys.alive(keys.service_id("executor", self.agent))
-        seen = False
-        async for event in self.ctx.bus.watch_alive(token):
-            if event.alive:
-                self.beliefs_out.resend()
-                if seen:
-                    self.ctx.log.warning("executor_restarted")
-                    await self.act(Reaction(commands=self.mind.intentions.executor_restarted()))
-                seen = True
+        back (`again`) lost the plan it had, so the intention is planned again."""
+        self.beliefs_out.resend()
+        if again:
+            self.ctx.log.warning("executor_restarted")
+            await self.act(Reaction(commands=self.mind.intentions.executor_restarted()))
 
     async def watch_group(self) -> None:
-        """Tell an agent that appears our standing claims (it missed them)."""
+        """Tell an agent that appears our standing claims (it missed them); not one back
+        with our own session (nothing was missed: `cbdi.peers`)."""
         claims = self.mind.claims
         if claims is None:
             return
+        peers = Peers(keys.alive(keys.service_id("scheduler", self.agent)))
         async for event in self.ctx.bus.watch_alive(keys.alive(keys.service_id("scheduler", "*"))):
-            if event.alive:
+            if peers.observe(event) in ("first", "again"):
                 for claim in claims.mine():
                     await publish(
                         self.ctx.bus, keys.scheduler_claims(self.agent), claim, block=True
@@ -321,8 +335,7 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
             serve(ctx.bus, state, StateRequest, service.on_state, ctx, trace=False), name="state"
         )  # read-only: not recorded (a watching operator would flood the recording)
         ctx.start(service.run(stream, settings.load_map), name="scheduler")
-        ctx.start(service.watch_planner(), name="planner-watch")
-        ctx.start(service.watch_executor(), name="executor-watch")
+        ctx.start(service.watch_peers(), name="peers-watch")
         ctx.start(service.watch_group(), name="group-watch")
 
     return body

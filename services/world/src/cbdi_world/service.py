@@ -243,8 +243,11 @@ class WorldService:
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
             await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)
+        clock = keys.world_stream("clock")
         for p in result.percepts:
-            await publish(bus, keys.world_percepts(p.agent), p, block=True)
+            outcomes = keys.world_outcomes(p.agent)
+            sent = {k: bus.sent[k] for k in (clock, outcomes) if bus.sent[k]}
+            await publish(bus, keys.world_percepts(p.agent), replace(p, sent=sent), block=True)
         await publish(bus, keys.world_stream("snapshot"), result.snapshot)
         if result.epoch % max(1, self.settings.stats_every) == 0:
             await publish(bus, keys.world_stream("stats"), w.stats())

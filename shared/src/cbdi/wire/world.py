@@ -117,13 +117,20 @@ class ItemView(Message, frozen=True, tag="cbdi.world.ItemView/1"):
     known: bool = True
 
 
+# What the world had published on an agent's keys when it sent the agent's percepts (the
+# last of its epoch): its tick and outcomes, per key, cumulative (as `EpochAck.sent`). A
+# gate holding fewer waits for the rest: the bus may recover one key's samples later than
+# another's (after a router restart), so arrival order across keys proves nothing.
+WorldSent = Annotated[dict[Symbol, Count], msgspec.Meta(max_length=8)]
+
+
 class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     """What one agent senses this epoch in the (2d+1)x(2d+1) square around it.
 
     `free` cells are inside the map and hold no wall, bin, person or agent; `blocked` are
     the other in-map cells of the square (the agent's own cell is reported as blocked by
     itself only in `position`). `items` lists the items lying in the square, `holding`
-    those the agent carries.
+    those the agent carries. `sent`: see `WorldSent` (the world service fills it in).
     """
 
     agent: AgentName
@@ -135,6 +142,7 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     blocked: Many[Cell]
     items: Many[ItemView]
     holding: Many[Symbol]
+    sent: WorldSent = {}
 
 
 class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
@@ -143,7 +151,7 @@ class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
     `instances` are objects first seen (name -> PDDL type), `add` the ground atoms sensed
     true, `delete` those sensed false, `fluents` function values read. The generic
     knowledge (`cbdi.literals.LiteralKnowledge`) applies them in that order; an atom
-    neither added nor deleted keeps what the agent believed.
+    neither added nor deleted keeps what the agent believed. `sent`: see `WorldSent`.
     """
 
     agent: AgentName
@@ -153,6 +161,7 @@ class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
     add: Many[Atom] = []
     delete: Many[Atom] = []
     fluents: Many[tuple[Atom, Finite]] = []
+    sent: WorldSent = {}
 
 
 # The percept messages a world publishes (a grid sensor's, any simulator's).
