@@ -132,7 +132,12 @@ class EpochGate:
             else:
                 s = self._of(self.sender_of(key))
                 if seq and seq < s.received.get(key, 0):
-                    s.received = {}  # the sender restarted: its counts start afresh
+                    # The sender restarted: its counts start afresh, and what its last
+                    # life sent that no ack released is dropped (a new count would
+                    # release it among the new life's messages: a belief update of the
+                    # old series applied to the new one).
+                    s.received, s.buffer = {}, []
+                    s.acks = {k: a for k, a in s.acks.items() if k[0] < 0}
                 s.buffer.append(item)
                 s.received[key] = max(s.received.get(key, 0), seq)
                 if isinstance(msg, PERCEPTS):
