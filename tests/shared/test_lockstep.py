@@ -142,3 +142,17 @@ async def test_senders_outside_lockstep_are_let_through() -> None:
     await gate.put(item(BELIEFS, 1, 1, beliefs(0)))  # a member: waits for its ack
     released = await gate.wait([], timeout=1)
     assert [k for k, _ in released.messages] == ["cbdi/r1/planner/plans"]
+
+
+async def test_a_restarted_senders_earlier_life_is_not_released_among_its_new_one() -> None:
+    """An update the killed sender sent that no ack released (its ack never came) must
+    not come out once the restarted sender's counts pass its number."""
+    gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
+    await gate.put(item(BELIEFS, 13, 40, beliefs(12)))  # the old life's last, unacked
+    await gate.put(item(BELIEFS, 1, 1, beliefs(14)))  # the new life starts afresh
+    for seq in range(2, 14):
+        await gate.put(item(BELIEFS, seq, seq, beliefs(13 + seq)))
+    await gate.put(ack(26, {BELIEFS: 13}))
+    released = await gate.wait([Need(S, 26)], timeout=1)
+    epochs = [m.epoch for _, m in released.messages]  # type: ignore[attr-defined]
+    assert epochs == list(range(14, 27)), epochs
