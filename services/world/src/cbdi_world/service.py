@@ -5,12 +5,20 @@ percepts, a snapshot and (periodically) statistics. Requests (`act`, `stats`, `i
 answered at once on the same event loop, so they never race with a step. Pacing comes
 from the injected clock: `speed` simulated seconds per wall second, or as fast as possible
 (speed 0), and in lockstep mode only once every agent acknowledged the epoch before.
+
+With `--state FILE` it saves its state every epoch and notes every request it serves
+(`cbdi_world.recovery`); restarted (`--restart` above 0, `CBDI_RESTART` from `cbdi up`)
+it goes on from that file at the epoch it was killed in, without the start barrier: the
+members send their latest acks again when its liveliness token comes back
+(`cbdi.lockstep.announce_ready`), and a request it already served (an executor asking
+again after losing the reply) gets the same reply, once.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+from collections import Counter
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 
@@ -44,9 +52,26 @@ from cbdi.wire.world import (
 )
 from cbdi_world.acks import AckTracker, members_of
 from cbdi_world.errors import UnknownAgentError, WorldError
+from cbdi_world.recovery import (
+    Published,
+    Recovered,
+    Served,
+    StateFile,
+    StateFileError,
+    WorldState,
+    restored_simulator,
+    simulator_state,
+)
 from cbdi_world.trace import RequestTrace
 
-__all__ = ["WorldService", "WorldSettings", "agent_entries", "build_world", "world_main"]
+__all__ = [
+    "WorldService",
+    "WorldSettings",
+    "agent_entries",
+    "build_world",
+    "recover",
+    "world_main",
+]
 
 
 @dataclass(frozen=True)
@@ -91,6 +116,17 @@ class WorldSettings(ServiceSettings):
         default=(),
         metadata={"help": "a simulator option KEY=VALUE (what it declares: its Options)"},
     )
+    state: str = field(
+        default="",
+        metadata={"help": "save the world's state to FILE every epoch, for a restart ('': none)"},
+    )
+    restart: int = field(
+        default=0,
+        metadata={
+            "help": "restarts so far (cbdi up sets CBDI_RESTART): above 0 the run goes on "
+            "from --state"
+        },
+    )
 
 
 class WorldService:
@@ -102,6 +138,7 @@ class WorldService:
         world: Simulator,
         settings: WorldSettings,
         clock: Clock | None = None,
+        store: StateFile | None = None,
     ) -> None:
         self.ctx = ctx
         self.world = world
@@ -121,6 +158,9 @@ class WorldService:
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
+        self.store = store
+        self.served: dict[str, Served] = {}  # this epoch's requests, by id: served once
+        self.resumed: Recovered | None = None
 
     def start(self) -> None:
         """Declare every endpoint now and start the tasks of the service."""
@@ -139,17 +179,16 @@ class WorldService:
         ctx.start(self.run(), name="epochs")
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
-        try:
-            if req.agent not in self.agents:
-                raise UnknownAgentError(req.agent)
-            reply = self.world.request(req)
-        except UnknownAgentError as exc:
+        before = self.served.get(req.request_id)
+        if before is not None and before.request == req:  # asked again: the reply was lost
+            self.ctx.log.info("act_repeated", epoch=self.world.epoch, agent=req.agent)
+            return before.reply
+        if req.agent not in self.agents:
             self.ctx.counters["unknown_agent"] += 1
             self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
-            return ErrorReply(code="unknown_agent", message=str(exc))
-        except CbdiError as exc:  # an action (or arguments) the simulator does not perform
-            reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
-        self.trace.record(self.world.epoch, req, reply)
+            return ErrorReply(code="unknown_agent", message=str(UnknownAgentError(req.agent)))
+        reply = self.serve_act(req)
+        self.note(Served(self.world.epoch, req, reply))  # on file before the reply goes out
         self.ctx.log.info(
             "act",
             epoch=self.world.epoch,
@@ -158,6 +197,16 @@ class WorldService:
             accepted=reply.accepted,
             reason=reply.reason,
         )
+        return reply
+
+    def serve_act(self, req: ActionRequest) -> ActionReply:
+        """Start `req` (of a known agent) in the simulator; trace it; remember the reply."""
+        try:
+            reply = self.world.request(req)
+        except CbdiError as exc:  # an action (or arguments) the simulator does not perform
+            reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
+        self.trace.record(self.world.epoch, req, reply)
+        self.served[req.request_id] = Served(self.world.epoch, req, reply)
         return reply
 
     async def on_stats(self, key: str, req: StatsRequest) -> Message:
@@ -185,24 +234,101 @@ class WorldService:
                 await self.acks.observe(ack)
 
     async def run(self) -> None:
-        """Publish epoch 0, then step until the run ends; keep serving requests after,
-        `linger` wall seconds (then stop: a run's world does not outlive it) or until
-        stopped."""
-        await self.wait_for_agents()
-        # The static world once, for recorders and viewers (also on request: rpc/info).
-        await publish(self.ctx.bus, keys.world_stream("info"), self.info, block=True)
-        await self.publish_epoch(self.world.initial())
-        start = self.clock.now()
+        """Publish epoch 0 (or go on from the state file), then step until the run ends;
+        keep serving requests after, `linger` wall seconds (then stop: a run's world does
+        not outlive it) or until stopped."""
+        if self.resumed is None:
+            await self.wait_for_agents()
+            # The static world once, for recorders and viewers (also on request: rpc/info).
+            await publish(self.ctx.bus, keys.world_stream("info"), self.info, block=True)
+            await self.advance(self.world.initial())
+            start = self.clock.now()
+        else:
+            await self.go_on(self.resumed)
+            # The epoch under way began before the kill: the next one is due at once.
+            start = self.clock.now() - (self.world.epoch + 1) * self.epoch_wall()
         while self.finished is None:
             await self.pace(start)
-            result = self.world.step()
-            await self.publish_epoch(result)
-            await self.check_end()
+            await self.advance(self.world.step())
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
+        if self.store is not None:
+            self.store.close()
         if self.settings.linger > 0:
             await WallClock().sleep(self.settings.linger)
             self.ctx.log.info("lingered", seconds=self.settings.linger)
             self.ctx.stop()
+
+    async def advance(self, result: EpochResult) -> None:
+        """Save the epoch the simulator reached, publish it, note that, see if the run ended."""
+        self.served.clear()
+        self.save(result)
+        await self.publish_epoch(result)
+        self.note(Published(result.epoch))
+        await self.check_end()
+
+    def resume(self, recovered: Recovered) -> None:
+        """Take back the host's part of a saved state (the simulator is restored already)
+        and serve again, on it, the requests served after it was saved."""
+        state = recovered.state
+        self.trace = state.trace
+        self.acks.acked.update((m, a) for m, a in state.acked.items() if m in self.acks.acked)
+        self.acks.behind.update(state.behind)
+        self.acks.stalls = Counter(state.stalls)
+        for entry in recovered.served:
+            reply = self.serve_act(entry.request)
+            if reply != entry.reply:  # a simulator that is not deterministic
+                self.ctx.log.warning("replay_differs", request=entry.request.request_id)
+        if recovered.published:
+            self.last_tick = self.tick_of(state.result)
+        self.resumed = recovered
+
+    async def go_on(self, recovered: Recovered) -> None:
+        """Carry on at the saved epoch: publish it if it did not go out, then wait for
+        its acks as usual (the members send theirs again: `cbdi.lockstep`)."""
+        epoch = recovered.state.result.epoch
+        self.ctx.log.info(
+            "recovered",
+            state=self.settings.state,
+            epoch=epoch,
+            served=len(recovered.served),
+            published=recovered.published,
+        )
+        if not recovered.published:
+            await self.publish_epoch(recovered.state.result)
+            self.note(Published(epoch))
+        await self.check_end()
+
+    def save(self, result: EpochResult) -> None:
+        """Save the state (with `--state`); a file that cannot be written is given up."""
+        if self.store is None:
+            return
+        state = WorldState(
+            simulator=simulator_state(self.world),
+            result=result,
+            trace=self.trace,
+            acked=dict(self.acks.acked),
+            behind=dict(self.acks.behind),
+            stalls=dict(self.acks.stalls),
+        )
+        try:
+            self.store.save(state)
+        except OSError as exc:
+            self.ctx.log.warning("state_not_saved", state=self.settings.state, error=str(exc))
+            self.store = None
+
+    def note(self, entry: Served | Published) -> None:
+        if self.store is None:
+            return
+        try:
+            self.store.note(entry)
+        except OSError as exc:
+            self.ctx.log.warning("state_not_saved", state=self.settings.state, error=str(exc))
+            self.store = None
+
+    def epoch_wall(self) -> float:
+        """Wall seconds per epoch (0: flat out)."""
+        speed = self.settings.speed
+        return self.world.info().epoch_duration / speed if speed > 0 else 0.0
 
     async def wait_for_agents(self) -> None:
         """The start barrier: epoch 0 waits until every member said it is ready."""
@@ -220,8 +346,7 @@ class WorldService:
         if s.lockstep:
             await self.wait_acks(self.world.epoch)
         if s.speed > 0:
-            due = start + (self.world.epoch + 1) * self.world.info().epoch_duration / s.speed
-            await self.clock.sleep_until(due)
+            await self.clock.sleep_until(start + (self.world.epoch + 1) * self.epoch_wall())
         else:
             await asyncio.sleep(0)  # flat out, but let requests in between epochs
 
@@ -230,16 +355,18 @@ class WorldService:
         if late:
             self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
 
-    async def publish_epoch(self, result: EpochResult) -> None:
-        bus, w = self.ctx.bus, self.world
-        tick = Tick(
+    def tick_of(self, result: EpochResult) -> Tick:
+        return Tick(
             epoch=result.epoch,
             time=result.time,
-            epoch_duration=w.info().epoch_duration,
+            epoch_duration=self.world.info().epoch_duration,
             speed=self.settings.speed,
             lockstep=self.settings.lockstep,
         )
-        self.last_tick = tick
+
+    async def publish_epoch(self, result: EpochResult) -> None:
+        bus, w = self.ctx.bus, self.world
+        tick = self.last_tick = self.tick_of(result)
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
             await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)
@@ -315,20 +442,44 @@ def agent_entries(entries: Sequence[str]) -> tuple[tuple[str, ...], dict[str, in
 
 def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
     """Return the service body serving `world` (built before the bus is opened); `clock`
-    paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read)."""
+    paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read). A
+    restart with a state file goes on from it (`recover`)."""
 
     async def body(ctx: ServiceContext) -> None:
         settings: WorldSettings = ctx.settings
+        store = StateFile(settings.state) if settings.state else None
+        recovered = recover(store, world, ctx) if store and settings.restart > 0 else None
+        simulator = recovered[0] if recovered else world
         ctx.log.info(
             "world",
             map=settings.map,
-            agents=",".join(world.info().agents),
+            agents=",".join(simulator.info().agents),
             speed=settings.speed,
             lockstep=settings.lockstep,
             seed=settings.seed,
             simulator=settings.simulator,
             options=",".join(settings.option),
         )
-        WorldService(ctx, world, settings, clock).start()
+        service = WorldService(ctx, simulator, settings, clock, store)
+        if recovered:
+            service.resume(recovered[1])
+        service.start()
 
     return body
+
+
+def recover(
+    store: StateFile, fresh: Simulator, ctx: ServiceContext
+) -> tuple[Simulator, Recovered] | None:
+    """Read a restarted world's state back: the simulator it saved and what followed.
+    A missing, damaged or foreign file is a warning naming it: the world starts afresh."""
+    try:
+        recovered = store.load()
+        simulator = restored_simulator(fresh, recovered.state.simulator, store.path)
+        if simulator.info() != fresh.info():
+            raise StateFileError(store.path, "of another world (its map or agents differ)")
+    except StateFileError as exc:
+        ctx.log.warning("state_unusable", state=str(store.path), reason=str(exc), then="afresh")
+        return None
+    store.open_log()
+    return simulator, recovered
