@@ -255,7 +255,6 @@ class ExecutorService:
             )
             await publish(bus, keys.executor_arrested(self.agent), effects.arrest, block=True)
 
-
     async def ask(self, key: str, req: ActionRequest) -> ActionReply:
         """Send one request. A world that does not answer (killed, being restarted) is
         asked again until it does, `world_wait` wall seconds at most: restarted, it goes

@@ -23,16 +23,19 @@ import os
 import pickle
 import struct
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
+from cbdi.runtime.log import Log
 from cbdi.simulator import EpochResult, Simulator
 from cbdi.wire.world import ActionReply, ActionRequest
 from cbdi_world.errors import WorldError
 from cbdi_world.trace import RequestTrace
 
 __all__ = [
+    "Keeper",
     "Published",
     "Recovered",
     "Served",
@@ -191,3 +194,47 @@ def _records(data: bytes, at: int) -> tuple[list[object], int]:
             break
         at += _HEAD.size + size
     return found, at
+
+
+class Keeper:
+    """A world's state file as the host keeps it: never the world's death. A file that
+    cannot be written is given up, with a warning; one that cannot be read back (missing,
+    damaged, of another world) is a warning naming it, and the world starts afresh."""
+
+    def __init__(self, path: str | Path, log: Log) -> None:
+        self.file: StateFile | None = StateFile(path)
+        self.path, self.log = str(path), log
+
+    def recover(self, fresh: Simulator) -> tuple[Simulator, Recovered] | None:
+        """Return the simulator saved and what followed it; None: start afresh."""
+        assert self.file is not None
+        try:
+            recovered = self.file.load()
+            simulator = restored_simulator(fresh, recovered.state.simulator, self.path)
+            if simulator.info() != fresh.info():
+                raise StateFileError(self.path, "of another world (its map or agents differ)")
+            self.file.open_log()
+        except (StateFileError, OSError) as exc:
+            self.log.warning("state_unusable", state=self.path, reason=str(exc), then="afresh")
+            return None
+        return simulator, recovered
+
+    def save(self, state: WorldState) -> None:
+        self._keep(lambda f: f.save(state))
+
+    def note(self, entry: Served | Published) -> None:
+        self._keep(lambda f: f.note(entry))
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
+
+    def _keep(self, write: Callable[[StateFile], None]) -> None:
+        if self.file is None:
+            return
+        try:
+            write(self.file)
+        except OSError as exc:
+            self.log.warning("state_not_saved", state=self.path, error=str(exc), then="none")
+            self.file.close()
+            self.file = None

@@ -52,16 +52,7 @@ from cbdi.wire.world import (
 )
 from cbdi_world.acks import AckTracker, members_of
 from cbdi_world.errors import UnknownAgentError, WorldError
-from cbdi_world.recovery import (
-    Published,
-    Recovered,
-    Served,
-    StateFile,
-    StateFileError,
-    WorldState,
-    restored_simulator,
-    simulator_state,
-)
+from cbdi_world.recovery import Keeper, Published, Recovered, Served, WorldState, simulator_state
 from cbdi_world.trace import RequestTrace
 
 __all__ = [
@@ -69,7 +60,6 @@ __all__ = [
     "WorldSettings",
     "agent_entries",
     "build_world",
-    "recover",
     "world_main",
 ]
 
@@ -138,7 +128,7 @@ class WorldService:
         world: Simulator,
         settings: WorldSettings,
         clock: Clock | None = None,
-        store: StateFile | None = None,
+        keeper: Keeper | None = None,
     ) -> None:
         self.ctx = ctx
         self.world = world
@@ -158,7 +148,7 @@ class WorldService:
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
-        self.store = store
+        self.keeper = keeper
         self.served: dict[str, Served] = {}  # this epoch's requests, by id: served once
         self.resumed: Recovered | None = None
 
@@ -251,8 +241,8 @@ class WorldService:
             await self.pace(start)
             await self.advance(self.world.step())
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
-        if self.store is not None:
-            self.store.close()
+        if self.keeper is not None:
+            self.keeper.close()
         if self.settings.linger > 0:
             await WallClock().sleep(self.settings.linger)
             self.ctx.log.info("lingered", seconds=self.settings.linger)
@@ -299,31 +289,21 @@ class WorldService:
         await self.check_end()
 
     def save(self, result: EpochResult) -> None:
-        """Save the state (with `--state`); a file that cannot be written is given up."""
-        if self.store is None:
-            return
-        state = WorldState(
-            simulator=simulator_state(self.world),
-            result=result,
-            trace=self.trace,
-            acked=dict(self.acks.acked),
-            behind=dict(self.acks.behind),
-            stalls=dict(self.acks.stalls),
-        )
-        try:
-            self.store.save(state)
-        except OSError as exc:
-            self.ctx.log.warning("state_not_saved", state=self.settings.state, error=str(exc))
-            self.store = None
+        """Save the state (with `--state`): the simulator at `result`, and the host's."""
+        if self.keeper is not None:
+            state = WorldState(
+                simulator=simulator_state(self.world),
+                result=result,
+                trace=self.trace,
+                acked=dict(self.acks.acked),
+                behind=dict(self.acks.behind),
+                stalls=dict(self.acks.stalls),
+            )
+            self.keeper.save(state)
 
     def note(self, entry: Served | Published) -> None:
-        if self.store is None:
-            return
-        try:
-            self.store.note(entry)
-        except OSError as exc:
-            self.ctx.log.warning("state_not_saved", state=self.settings.state, error=str(exc))
-            self.store = None
+        if self.keeper is not None:
+            self.keeper.note(entry)
 
     def epoch_wall(self) -> float:
         """Wall seconds per epoch (0: flat out)."""
@@ -443,12 +423,12 @@ def agent_entries(entries: Sequence[str]) -> tuple[tuple[str, ...], dict[str, in
 def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
     """Return the service body serving `world` (built before the bus is opened); `clock`
     paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read). A
-    restart with a state file goes on from it (`recover`)."""
+    restart with a state file goes on from it (`Keeper.recover`)."""
 
     async def body(ctx: ServiceContext) -> None:
         settings: WorldSettings = ctx.settings
-        store = StateFile(settings.state) if settings.state else None
-        recovered = recover(store, world, ctx) if store and settings.restart > 0 else None
+        keeper = Keeper(settings.state, ctx.log) if settings.state else None
+        recovered = keeper.recover(world) if keeper and settings.restart > 0 else None
         simulator = recovered[0] if recovered else world
         ctx.log.info(
             "world",
@@ -460,26 +440,9 @@ def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
             simulator=settings.simulator,
             options=",".join(settings.option),
         )
-        service = WorldService(ctx, simulator, settings, clock, store)
+        service = WorldService(ctx, simulator, settings, clock, keeper)
         if recovered:
             service.resume(recovered[1])
         service.start()
 
     return body
-
-
-def recover(
-    store: StateFile, fresh: Simulator, ctx: ServiceContext
-) -> tuple[Simulator, Recovered] | None:
-    """Read a restarted world's state back: the simulator it saved and what followed.
-    A missing, damaged or foreign file is a warning naming it: the world starts afresh."""
-    try:
-        recovered = store.load()
-        simulator = restored_simulator(fresh, recovered.state.simulator, store.path)
-        if simulator.info() != fresh.info():
-            raise StateFileError(store.path, "of another world (its map or agents differ)")
-    except StateFileError as exc:
-        ctx.log.warning("state_unusable", state=str(store.path), reason=str(exc), then="afresh")
-        return None
-    store.open_log()
-    return simulator, recovered
