@@ -25,6 +25,7 @@ from cbdi_world.recovery import (
     Served,
     StateFile,
     StateFileError,
+    Stepped,
     WorldState,
     restored_simulator,
     simulator_state,
@@ -95,10 +96,11 @@ def test_a_restored_world_steps_as_the_one_that_went_on(tmp_path: Path, map_name
     store.close()
 
     back = store.load()
-    assert back.published and back.state.result == result
+    assert back.state.result == result and back.entries[0] == Published(result.epoch)
     restored = restored_simulator(grid(map_name), back.state.simulator, store.path)
     assert restored is not world and restored.epoch == world.epoch
-    assert [restored.request(s.request) for s in back.served] == [reply for _, reply in served]
+    again_served = [restored.request(e.request) for e in back.entries if isinstance(e, Served)]
+    assert again_served == [reply for _, reply in served]
     rng_copy = random.Random()
     rng_copy.setstate(rng.getstate())
     went_on, again = play(world, rng, 40), play(restored, rng_copy, 40)
@@ -199,14 +201,18 @@ def test_a_torn_tail_is_cut_and_noting_goes_on(tmp_path: Path) -> None:
     store = StateFile(path)
     with path.open("ab") as f:
         f.write(b"\x99\x00\x00\x00\x01\x02")  # half a record: a write cut short
-    back = store.load()
-    assert back.served == [] and not back.published
+    assert store.load().entries == []
     store.open_log()
     store.note(Served(0, req, reply))
-    store.note(Published(0))
+    store.note(Stepped(1, {"robot1/executor": (0, 2)}))
+    store.note(Published(1))
     store.close()
     again = StateFile(path).load()
-    assert again.served == [Served(0, req, reply)] and again.published
+    assert again.entries == [
+        Served(0, req, reply),
+        Stepped(1, {"robot1/executor": (0, 2)}),
+        Published(1),
+    ]
 
 
 def test_a_state_file_that_cannot_be_written_is_given_up(tmp_path: Path) -> None:

@@ -35,7 +35,9 @@ def world_of(settings: WorldSettings, network: MemoryNetwork, restart: int) -> T
     return Together([TogetherService("world", s, main)], network)
 
 
-async def run(state: Path, stop_at: list[int]) -> tuple[RunFinished, list[tuple[int, int]]]:
+async def run(
+    state: Path, stop_at: list[int], every: int = 20
+) -> tuple[RunFinished, list[tuple[int, int]]]:
     """Run paper-7x7 to its end, the world stopped and restarted at each of `stop_at`;
     return the world's last word and each tick's (epoch, sequence number)."""
     members = tuple(f"robot1/{c}" for c in ("planner", "scheduler", "executor"))
@@ -50,6 +52,7 @@ async def run(state: Path, stop_at: list[int]) -> tuple[RunFinished, list[tuple[
         member=members,
         option=("people_phase=true", "people_jitter=1"),
         state=str(state),
+        state_every=every,
     )
     network = MemoryNetwork()
     ended = messages(network.bus(), keys.world_stream("events"), RunFinished, LogSink())
@@ -77,10 +80,12 @@ async def run(state: Path, stop_at: list[int]) -> tuple[RunFinished, list[tuple[
     return finished, published
 
 
-async def test_a_restarted_world_goes_on_with_the_same_run(tmp_path: Path) -> None:
+# Saved whole every epoch, or every 20 (then the steps since are replayed: 10 and 3).
+@pytest.mark.parametrize("every", [1, 20])
+async def test_a_restarted_world_goes_on_with_the_same_run(tmp_path: Path, every: int) -> None:
     plain, _ = await run(tmp_path / "plain.state", [])
     assert plain.reason == "done" and plain.requests > 0
-    stopped, ticks = await run(tmp_path / "world.state", [10, 23])
+    stopped, ticks = await run(tmp_path / "world.state", [10, 23], every)
     assert stopped.reason == "done" and not stopped.stalls
     assert (stopped.trace_digest, stopped.epoch) == (plain.trace_digest, plain.epoch)
     # Three worlds (each one's ticks numbered from 1), every epoch published once.

@@ -1,14 +1,17 @@
 """The world's state on disk, so a killed world goes on where it was (`StateFile`).
 
-Once per epoch, right after the simulator stepped and before the epoch is published, the
-host saves a `WorldState`: the simulator (its `save_state()` bytes, or the pickled
-object), the epoch's result, the request trace and the lockstep marks.
-What changes the world between two saves is appended to the same file as it happens:
-each request served with its reply (`Served`, before the reply goes out), and that the
-epoch went out (`Published`). A world restarted by `cbdi up` (`CBDI_RESTART` above 0)
-reads the file back (`StateFile.load`), replays the requests on the restored simulator
-(the same requests give the same replies: the simulator is deterministic) and goes on:
-the same items, people, robots, random generators, pending actions, trace and stalls.
+Every few epochs (`--state-every`), right after the simulator stepped and before the
+epoch is published, the host saves a `WorldState`: the simulator (its `save_state()`
+bytes, or the pickled object), the epoch's result, the request trace and the lockstep
+marks. What changes the world between two saves is appended to the same file as it
+happens: each request served with its reply (`Served`, before the reply goes out),
+each step (`Stepped`, with the lockstep marks then) and that an epoch went out
+(`Published`). A world restarted by `cbdi up` (`CBDI_RESTART` above 0) reads the file
+back (`StateFile.load`) and replays the entries on the restored simulator, in order (the
+same requests and steps give the same replies and epochs: the simulator is
+deterministic), then goes on: the same items, people, robots, random generators,
+pending actions, trace and stalls. A whole save costs about a millisecond (a 30x30 map,
+8 robots), an entry some microseconds.
 
 The file is written whole to a temporary file and renamed over the old one (a reader
 never sees half a state), and entries are appended with a length and a CRC each, so a
@@ -35,12 +38,14 @@ from cbdi_world.errors import WorldError
 from cbdi_world.trace import RequestTrace
 
 __all__ = [
+    "Entry",
     "Keeper",
     "Published",
     "Recovered",
     "Served",
     "StateFile",
     "StateFileError",
+    "Stepped",
     "WorldState",
     "restored_simulator",
     "simulator_state",
@@ -82,19 +87,31 @@ class Served:
 
 
 @dataclass(frozen=True)
+class Stepped:
+    """The simulator stepped to `epoch`; the lockstep marks as they were then."""
+
+    epoch: int
+    acked: dict[str, tuple[int, int]] = field(default_factory=dict)
+    behind: dict[str, int] = field(default_factory=dict)
+    stalls: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Published:
     """Epoch `epoch` went out on the bus."""
 
     epoch: int
 
 
+Entry = Served | Stepped | Published
+
+
 @dataclass
 class Recovered:
-    """A state read back: the saved state, and what happened after it was saved."""
+    """A state read back: the saved state, and what happened after it, in order."""
 
     state: WorldState
-    served: list[Served]
-    published: bool
+    entries: list[Entry]
 
 
 def simulator_state(simulator: Simulator) -> bytes:
@@ -146,7 +163,7 @@ class StateFile:
             f.truncate(self._end)
         self._log = self.path.open("ab", buffering=0)
 
-    def note(self, entry: Served | Published) -> None:
+    def note(self, entry: Entry) -> None:
         """Append what happened after the saved state (no-op before the first save)."""
         if self._log is not None:
             self._log.write(_record(entry))
@@ -167,11 +184,8 @@ class StateFile:
         records, self._end = _records(data, len(MAGIC))
         if not records or not isinstance(records[0], WorldState):
             raise StateFileError(self.path, "no whole state in it")
-        state = records[0]
-        epoch = state.result.epoch
-        served = [r for r in records[1:] if isinstance(r, Served) and r.epoch == epoch]
-        published = any(isinstance(r, Published) and r.epoch == epoch for r in records[1:])
-        return Recovered(state, served, published)
+        entries = [r for r in records[1:] if isinstance(r, Served | Stepped | Published)]
+        return Recovered(records[0], entries)
 
 
 def _record(item: object) -> bytes:
@@ -222,7 +236,7 @@ class Keeper:
     def save(self, state: WorldState) -> None:
         self._keep(lambda f: f.save(state))
 
-    def note(self, entry: Served | Published) -> None:
+    def note(self, entry: Entry) -> None:
         self._keep(lambda f: f.note(entry))
 
     def close(self) -> None:

@@ -52,7 +52,16 @@ from cbdi.wire.world import (
 )
 from cbdi_world.acks import AckTracker, members_of
 from cbdi_world.errors import UnknownAgentError, WorldError
-from cbdi_world.recovery import Keeper, Published, Recovered, Served, WorldState, simulator_state
+from cbdi_world.recovery import (
+    Entry,
+    Keeper,
+    Published,
+    Recovered,
+    Served,
+    Stepped,
+    WorldState,
+    simulator_state,
+)
 from cbdi_world.trace import RequestTrace
 
 __all__ = [
@@ -108,7 +117,11 @@ class WorldSettings(ServiceSettings):
     )
     state: str = field(
         default="",
-        metadata={"help": "save the world's state to FILE every epoch, for a restart ('': none)"},
+        metadata={"help": "keep the world's state in FILE, for a restart ('': none)"},
+    )
+    state_every: int = field(
+        default=20,
+        metadata={"help": "save the whole state every N epochs (in between: what changed it)"},
     )
     restart: int = field(
         default=0,
@@ -150,7 +163,8 @@ class WorldService:
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
         self.keeper = keeper
         self.served: dict[str, Served] = {}  # this epoch's requests, by id: served once
-        self.resumed: Recovered | None = None
+        self.resumed: tuple[EpochResult, bool] | None = None  # the epoch, and if it went out
+        self.saved_at = -1  # the epoch of the last whole save
 
     def start(self) -> None:
         """Declare every endpoint now and start the tasks of the service."""
@@ -234,7 +248,7 @@ class WorldService:
             await self.advance(self.world.initial())
             start = self.clock.now()
         else:
-            await self.go_on(self.resumed)
+            await self.go_on(*self.resumed)
             # The epoch under way began before the kill: the next one is due at once.
             start = self.clock.now() - (self.world.epoch + 1) * self.epoch_wall()
         while self.finished is None:
@@ -257,51 +271,62 @@ class WorldService:
         await self.check_end()
 
     def resume(self, recovered: Recovered) -> None:
-        """Take back the host's part of a saved state (the simulator is restored already)
-        and serve again, on it, the requests served after it was saved."""
+        """Take back the host's part of a saved state (the simulator is restored already),
+        then replay on it what followed, in order: requests served, steps, publications."""
         state = recovered.state
-        self.trace = state.trace
-        self.acks.acked.update((m, a) for m, a in state.acked.items() if m in self.acks.acked)
-        self.acks.behind.update(state.behind)
-        self.acks.stalls = Counter(state.stalls)
-        for entry in recovered.served:
-            reply = self.serve_act(entry.request)
-            if reply != entry.reply:  # a simulator that is not deterministic
-                self.ctx.log.warning("replay_differs", request=entry.request.request_id)
-        if recovered.published:
-            self.last_tick = self.tick_of(state.result)
-        self.resumed = recovered
+        self.trace, self.saved_at = state.trace, state.result.epoch
+        self.restore_marks(state.acked, state.behind, state.stalls)
+        result, published = state.result, False
+        for entry in recovered.entries:
+            if isinstance(entry, Stepped):
+                self.served.clear()
+                result, published = self.world.step(), False
+                self.restore_marks(entry.acked, entry.behind, entry.stalls)
+            elif isinstance(entry, Served):
+                if self.serve_act(entry.request) != entry.reply:  # not deterministic
+                    self.ctx.log.warning("replay_differs", request=entry.request.request_id)
+            else:
+                published = entry.epoch == result.epoch
+        if published:
+            self.last_tick = self.tick_of(result)
+        self.resumed = (result, published)
 
-    async def go_on(self, recovered: Recovered) -> None:
-        """Carry on at the saved epoch: publish it if it did not go out, then wait for
+    def restore_marks(
+        self, acked: dict[str, tuple[int, int]], behind: dict[str, int], stalls: dict[str, int]
+    ) -> None:
+        self.acks.acked.update((m, a) for m, a in acked.items() if m in self.acks.acked)
+        self.acks.behind = dict(behind)
+        self.acks.stalls = Counter(stalls)
+
+    async def go_on(self, result: EpochResult, published: bool) -> None:
+        """Carry on at the epoch reached: publish it if it did not go out, then wait for
         its acks as usual (the members send theirs again: `cbdi.lockstep`)."""
-        epoch = recovered.state.result.epoch
         self.ctx.log.info(
             "recovered",
             state=self.settings.state,
-            epoch=epoch,
-            served=len(recovered.served),
-            published=recovered.published,
+            epoch=result.epoch,
+            saved=self.saved_at,
+            published=published,
         )
-        if not recovered.published:
-            await self.publish_epoch(recovered.state.result)
-            self.note(Published(epoch))
+        if not published:
+            await self.publish_epoch(result)
+            self.note(Published(result.epoch))
         await self.check_end()
 
     def save(self, result: EpochResult) -> None:
-        """Save the state (with `--state`): the simulator at `result`, and the host's."""
-        if self.keeper is not None:
-            state = WorldState(
-                simulator=simulator_state(self.world),
-                result=result,
-                trace=self.trace,
-                acked=dict(self.acks.acked),
-                behind=dict(self.acks.behind),
-                stalls=dict(self.acks.stalls),
-            )
-            self.keeper.save(state)
+        """Keep the state (with `--state`): all of it every `state_every` epochs, else
+        the step and the lockstep marks."""
+        if self.keeper is None:
+            return
+        marks = dict(self.acks.acked), dict(self.acks.behind), dict(self.acks.stalls)
+        if self.saved_at >= 0 and result.epoch - self.saved_at < self.settings.state_every:
+            self.keeper.note(Stepped(result.epoch, *marks))
+            return
+        simulator = simulator_state(self.world)
+        self.keeper.save(WorldState(simulator, result, self.trace, *marks))
+        self.saved_at = result.epoch
 
-    def note(self, entry: Served | Published) -> None:
+    def note(self, entry: Entry) -> None:
         if self.keeper is not None:
             self.keeper.note(entry)
 
@@ -381,6 +406,8 @@ def build_world(settings: WorldSettings) -> Simulator:
     CbdiError/WorldError naming what is wrong (a map it refuses names the simulator)."""
     if not (math.isfinite(settings.linger) and settings.linger >= 0):
         raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
+    if settings.state_every < 1:
+        raise WorldError(f"--state-every must be an epoch count >= 1, not {settings.state_every}")
     simulator = load_simulator(settings.simulator, "--simulator")
     if not settings.map and getattr(simulator, "needs_map", True):
         raise WorldError(
