@@ -15,7 +15,8 @@
   (their latest acks sent again, the executor's request asked again): in lockstep the
   run ends done, everything recycled, the mission within 5 epochs of the undisturbed
   run's (the same run, trace and all, when the kill misses a publication), the
-  recording holding every epoch; in real time the epochs stall under 2 s of wall time.
+  recording holding every epoch and replaying (`cbdi replay --check`); in real time the
+  epochs stall under 2 s of wall time.
 
 Timings are generous bounds, not measurements: these pass on a loaded machine.
 """
@@ -333,6 +334,12 @@ def test_a_killed_world_goes_on_from_its_state_and_the_run_is_the_same(tmp_path:
     assert abs(summary["sim_time"] - undisturbed["sim_time"]) <= 5.0  # epochs of 1 s
     epochs = [epoch for epoch, _ in _ticks(record)]
     assert sorted(set(epochs)) == list(range(summary["epochs"] + 1)), epochs
+    # The recording replays: the acks sent again to the restarted world are not decisions.
+    check = [CBDI, "replay", str(record), "--agent", "robot1", "--check"]
+    replayed = subprocess.run(check, capture_output=True, text=True, cwd=REPO, timeout=200)
+    assert "note: world restarted" in replayed.stdout, replayed.stdout[-2000:]
+    if same:  # the same run: the same decisions
+        assert replayed.returncode == 0 and "same: " in replayed.stdout, replayed.stdout[-2000:]
 
 
 @pytest.mark.timeout(300)

@@ -416,11 +416,12 @@ async def announce_ready(
 
 
 async def resend_latest_ack(bus: Bus, agent: str, component: str) -> None:
-    """Send our latest ack again, unchanged, each time the world's token (re)appears: a
-    restarted world waits for the acks its predecessor got (the first appearance finds
-    none sent, or only `ready`, which the world takes as often as it comes)."""
-    member = keys.member(agent, component)
+    """Send our latest ack again, unchanged, each time the world's token comes back after
+    it went: a restarted world waits for the acks its predecessor got. (The token seen
+    when we start watching is the world we know: nothing is sent for it.)"""
+    member, gone = keys.member(agent, component), False
     async for event in bus.watch_alive(keys.alive(keys.service_id(WORLD))):
         latest = _LATEST.get(bus, {}).get(member)
-        if event.alive and latest is not None and latest.epoch >= 0:
+        if event.alive and gone and latest is not None and latest.epoch >= 0:
             await publish(bus, keys.epoch_ack(agent, component), latest, block=True)
+        gone = not event.alive
