@@ -297,10 +297,10 @@ def _ticks(record: Path) -> list[tuple[int, float]]:
     return [(decode(m.payload, Tick).epoch, m.publish_ns / 1e9) for m in found]
 
 
-def _kill_world(tmp_path: Path, *args: str) -> tuple[dict[str, Any], Path]:
+def _kill_world(tmp_path: Path, *args: str) -> tuple[dict[str, Any], Path, str]:
     """Run paper-7x7 at speed 4, recorded; SIGKILL the world once it served a request
     of epoch 10 or later; check it went on from there to done, with no stall; return
-    the summary and the recording."""
+    the summary, the recording and the launcher's log."""
     log, record = tmp_path / "up.log", tmp_path / "run.mcap"
     up = _up(log, "--speed", "4", "--record", str(record), *args)
     try:
@@ -318,7 +318,7 @@ def _kill_world(tmp_path: Path, *args: str) -> tuple[dict[str, Any], Path]:
     assert up.returncode == 0 and summary["result"] == "done", text[-3000:]
     assert summary["stats"]["litter_recycled"] == 3
     assert "ack_timeout" not in text and not any(summary["stalls"].values()), text[-3000:]
-    return summary, record
+    return summary, record, text
 
 
 @pytest.mark.timeout(400)
@@ -326,7 +326,7 @@ def test_a_killed_world_goes_on_from_its_state_and_the_run_is_the_same(tmp_path:
     plain = _up(tmp_path / "plain.log", "--speed", "4", "--quiet")
     out, _ = plain.communicate(timeout=300)
     undisturbed = json.loads(out)
-    summary, record = _kill_world(tmp_path)
+    summary, record, text = _kill_world(tmp_path)
     # Virtual time: the restarted world has the same litter, people, robots, generators
     # and pending actions, so the mission is the undisturbed one's (within 5 epochs).
     same = summary["trace_digest"] == undisturbed["trace_digest"]
@@ -338,13 +338,15 @@ def test_a_killed_world_goes_on_from_its_state_and_the_run_is_the_same(tmp_path:
     check = [CBDI, "replay", str(record), "--agent", "robot1", "--check"]
     replayed = subprocess.run(check, capture_output=True, text=True, cwd=REPO, timeout=200)
     assert "note: world restarted" in replayed.stdout, replayed.stdout[-2000:]
-    if same:  # the same run: the same decisions
+    # The same run, the same decisions; unless the scheduler sent its first search again
+    # at the start (the planner's token came after it), which a replay does not repeat.
+    if same and "event=search_resent" not in text:
         assert replayed.returncode == 0 and "same: " in replayed.stdout, replayed.stdout[-2000:]
 
 
 @pytest.mark.timeout(300)
 def test_a_killed_world_stalls_a_real_time_run_under_two_seconds(tmp_path: Path) -> None:
-    summary, record = _kill_world(tmp_path, "--no-lockstep")
+    summary, record, _ = _kill_world(tmp_path, "--no-lockstep")
     ticks = _ticks(record)
     assert [e for e, _ in ticks] == list(range(summary["epochs"] + 1))
     gaps = [b - a for (_, a), (_, b) in itertools.pairwise(ticks)]
