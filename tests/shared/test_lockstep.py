@@ -1,9 +1,14 @@
-"""The epoch gate: what an ack covers is released, in the sender's order, nothing else."""
+"""The epoch gate: what an ack covers is released, in the sender's order, nothing else;
+a member's latest ack goes again to a restarted world."""
 
 from __future__ import annotations
 
+import asyncio
+
+from cbdi import keys
+from cbdi.bus import LogSink, MemoryNetwork, messages
 from cbdi.bus.typed import Stamped
-from cbdi.lockstep import WORLD, EpochGate, Need
+from cbdi.lockstep import WORLD, EpochGate, Need, resend_latest_ack, send_ack
 from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.base import Message
 from cbdi.wire.world import EpochAck, Percepts, Tick
@@ -156,3 +161,25 @@ async def test_a_restarted_senders_earlier_life_is_not_released_among_its_new_on
     released = await gate.wait([Need(S, 26)], timeout=1)
     epochs = [m.epoch for _, m in released.messages]  # type: ignore[attr-defined]
     assert epochs == list(range(14, 27)), epochs
+
+
+async def test_a_member_sends_its_latest_ack_again_when_the_world_comes_back() -> None:
+    """A restarted world lost the acks its predecessor got: each member sends its latest
+    one again, the very same message, when the world's token comes back (not for the
+    world it already knew)."""
+    network = MemoryNetwork()
+    world, member = network.bus(), network.bus()
+    token = await world.declare_token(keys.alive("world"))
+    heard = messages(network.bus(), keys.epoch_ack("r1", "executor"), EpochAck, LogSink())
+    await send_ack(member, "r1", "executor", 7)
+    _, sent = await anext(heard)
+    resend = asyncio.create_task(resend_latest_ack(member, "r1", "executor"))
+    await asyncio.sleep(0.01)  # the world it knows: nothing sent
+    await token.close()  # killed ...
+    await asyncio.sleep(0.01)
+    await world.declare_token(keys.alive("world"))  # ... and back
+    async with asyncio.timeout(5):
+        _, again = await anext(heard)
+    assert again == sent and again.epoch == 7
+    resend.cancel()
+    assert member.sent[keys.epoch_ack("r1", "executor")] == 2  # once, and once again

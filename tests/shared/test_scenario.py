@@ -111,6 +111,16 @@ def test_each_service_is_told_its_args_and_the_launcher_records_them() -> None:
     assert planner[planner.index("--planning") + 1] == "offline"
 
 
+def test_only_the_world_is_told_its_state_file_and_not_in_its_args() -> None:
+    # In the environment: the recorded arguments (and `cbdi compose`'s) stay the same.
+    scenario = cli.scenario_from_args(cli._parser().parse_args(["paper-7x7"]))
+    plain = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1")}
+    kept = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1", state="/run/world.state")}
+    assert kept["world"].env["CBDI_STATE"] == "/run/world.state"
+    assert kept["world"].args == plain["world"].args and "CBDI_STATE" not in plain["world"].env
+    assert not any("CBDI_STATE" in s.env for name, s in kept.items() if name != "world")
+
+
 def test_one_process_per_agent_runs_its_components_with_the_same_args() -> None:
     scenario = cli.scenario_from_args(cli._parser().parse_args(["paper-7x7", "--agents", "2"]))
     alone = {s.service: s for s in _specs(scenario, "tcp/127.0.0.1:1")}

@@ -18,12 +18,16 @@ race ours) is taken at the next gate, however early it comes.
 Resynchronisation, one rule for late, frozen and restarted members alike: a `Need` not
 met within the timeout is given up for this epoch and its sender named as late; what it
 sent meanwhile is taken at the next gate. A sender whose counts go back has restarted:
-its counts start afresh.
+its counts start afresh. A restarted world (it goes on from its state file) lost the
+acks its predecessor had: each member sends its latest one again, the very same
+message, when the world's liveliness token comes back (`announce_ready`); an ack seen
+twice changes no gate.
 """
 
 from __future__ import annotations
 
 import asyncio
+import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -45,6 +49,7 @@ __all__ = [
     "ack",
     "announce_ready",
     "default_sender",
+    "resend_latest_ack",
     "send_ack",
     "stage_rank",
 ]
@@ -53,6 +58,8 @@ WORLD = "world"  # the sender name of everything the world publishes
 READY_EVERY = 0.5  # wall seconds between `ready` announcements (the barrier only)
 ASK_WORLD = 2.0  # wall seconds to wait for the world's info before epoch 0
 MAX_SENT_KEYS = 64
+# Each bus's latest ack per member, as sent: what a restarted world is told again.
+_LATEST: weakref.WeakKeyDictionary[Bus, dict[str, EpochAck]] = weakref.WeakKeyDictionary()
 
 
 def stage_rank(stage: str) -> int:
@@ -413,6 +420,7 @@ def ack(agent: str, component: str, epoch: int, stage: str, bus: Bus) -> EpochAc
 async def send_ack(bus: Bus, agent: str, component: str, epoch: int, stage: str = "done") -> None:
     """Publish the ack of `epoch` at `stage` (what this component sent is in it)."""
     msg = ack(agent, component, epoch, stage, bus)
+    _LATEST.setdefault(bus, {})[keys.member(agent, component)] = msg
     await publish(bus, keys.epoch_ack(agent, component), msg, block=True)
 
 
@@ -426,10 +434,24 @@ async def announce_ready(
 ) -> None:
     """Say `ready` (the start barrier, epoch -1) until `started()`: the world may come
     up after us, so one announcement could be lost. With `lockstep`, a run found under
-    way (we restarted) is joined at its current epoch (`Lockstep.rejoin`)."""
+    way (we restarted) is joined at its current epoch (`Lockstep.rejoin`). Then, for the
+    rest of the run, `resend_latest_ack`."""
     clock = WallClock()
     while not started():
         await send_ack(bus, agent, component, -1, "ready")
         if lockstep is not None and await lockstep.rejoin():
-            return
+            break
         await clock.sleep(every)
+    await resend_latest_ack(bus, agent, component)
+
+
+async def resend_latest_ack(bus: Bus, agent: str, component: str) -> None:
+    """Send our latest ack again, unchanged, each time the world's token comes back after
+    it went: a restarted world waits for the acks its predecessor got. (The token seen
+    when we start watching is the world we know: nothing is sent for it.)"""
+    member, gone = keys.member(agent, component), False
+    async for event in bus.watch_alive(keys.alive(keys.service_id(WORLD))):
+        latest = _LATEST.get(bus, {}).get(member)
+        if event.alive and gone and latest is not None and latest.epoch >= 0:
+            await publish(bus, keys.epoch_ack(agent, component), latest, block=True)
+        gone = not event.alive

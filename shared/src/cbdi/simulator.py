@@ -28,6 +28,12 @@ field with its default and `metadata={"help": ...}`, and a method `problems()` r
 A simulator that needs no map file (the world service's `clock`) says so with a class
 attribute `needs_map = False`; a scenario for it has no `map`.
 
+A killed world goes on from its state file (`cbdi_world.recovery`): the host saves the
+simulator object pickled, so it must pickle (plain Python, `random.Random` and pymunk
+bodies do) and stay deterministic; one that does not pickle defines `save_state() ->
+bytes` and `restore_state(data: bytes) -> None` (called on one built from the same
+config).
+
 `request` gets grounded PDDL actions (`req.action`, `req.args`) for agents of `info()`
 only (the host answers `unknown_agent` for any other); it rejects what it cannot do with
 an `ActionReply(accepted=False, reason=...)`, and raises for nothing a client sends.

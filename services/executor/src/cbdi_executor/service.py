@@ -10,6 +10,7 @@ nothing waits), so a lockstep world never runs ahead of the agent.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
@@ -17,8 +18,8 @@ from cbdi import keys
 from cbdi.beliefs import BeliefSet, BeliefsReceiver
 from cbdi.bus import publish, request, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
-from cbdi.clock import SimClock
-from cbdi.errors import CbdiError
+from cbdi.clock import SimClock, WallClock
+from cbdi.errors import CbdiError, RequestTimeoutError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.performer import outcomes_key, performer_key, stop_key
 from cbdi.runtime import ServiceContext, ServiceSettings
@@ -31,7 +32,16 @@ from cbdi.wire.agent import (
     PartialPlan,
 )
 from cbdi.wire.base import Message
-from cbdi.wire.world import PERCEPTS, ActionOutcome, ActionReply, EpochAck, Percepts, Sensed, Tick
+from cbdi.wire.world import (
+    PERCEPTS,
+    ActionOutcome,
+    ActionReply,
+    ActionRequest,
+    EpochAck,
+    Percepts,
+    Sensed,
+    Tick,
+)
 from cbdi_executor.dispatcher import Dispatcher, Effects
 
 __all__ = ["ExecutorService", "ExecutorSettings", "executor_main"]
@@ -60,6 +70,10 @@ class ExecutorSettings(ServiceSettings):
         default=(),
         metadata={"help": "an ACTION a performer carries out (cbdi.performer), not the world"},
     )
+    world_wait: float = field(
+        default=15.0,
+        metadata={"help": "wall s to ask a world that does not answer again (it restarts)"},
+    )
 
 
 class ExecutorService:
@@ -71,8 +85,10 @@ class ExecutorService:
         agent: str,
         ack_timeout: float = 120.0,
         performers: tuple[str, ...] = (),
+        world_wait: float = 15.0,
     ) -> None:
         self.ctx, self.agent = ctx, agent
+        self.world_wait = world_wait
         self.performers = frozenset(a.lower() for a in performers)
         self.dispatcher = Dispatcher(agent)
         self.clock = SimClock()
@@ -217,7 +233,7 @@ class ExecutorService:
             to = self.performers and req.action.lower() in self.performers
             key = performer_key(self.agent, req.action) if to else keys.world_rpc("act")
             try:
-                reply = await request(bus, key, req, ActionReply)
+                reply = await self.ask(key, req)
             except CbdiError as exc:
                 reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
             answered = self.dispatcher.on_reply(reply, now)
@@ -239,12 +255,32 @@ class ExecutorService:
             )
             await publish(bus, keys.executor_arrested(self.agent), effects.arrest, block=True)
 
+    async def ask(self, key: str, req: ActionRequest) -> ActionReply:
+        """Send one request. A world that does not answer (killed, being restarted) is
+        asked again until it does, `world_wait` wall seconds at most: restarted, it goes
+        on where it was, and a request it served already gets the same reply again."""
+        clock = WallClock()
+        wait = self.world_wait if key == keys.world_rpc("act") else 0.0
+        deadline = clock.now() + wait
+        for attempt in itertools.count():
+            try:
+                return await request(self.ctx.bus, key, req, ActionReply)
+            except RequestTimeoutError:
+                if clock.now() >= deadline:
+                    raise
+                if attempt == 0:
+                    self.ctx.log.warning("world_silent", request=req.request_id, wait=wait)
+                await clock.sleep(0.1)
+        raise AssertionError("unreachable")
+
 
 def executor_main(settings: ExecutorSettings) -> ServiceMain:
     """Return the service body of one executor."""
 
     async def body(ctx: ServiceContext) -> None:
-        service = ExecutorService(ctx, settings.agent, settings.ack_timeout, settings.performer)
+        service = ExecutorService(
+            ctx, settings.agent, settings.ack_timeout, settings.performer, settings.world_wait
+        )
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         ctx.start(service.run(stream), name="executor")
         stop = serve(

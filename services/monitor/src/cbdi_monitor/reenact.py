@@ -254,19 +254,22 @@ def outputs_of(
 ) -> dict[str, list[Output]]:
     """Return what `members` published, by key, from `(key, seq, payload)` in order.
 
-    Left out: error reports (`NOT_COMPARED`) and `ready` acks (both paced by the clock).
+    Left out: error reports (`NOT_COMPARED`), `ready` acks (both paced by the clock) and
+    an ack sent again as it was (to a restarted world, `cbdi.lockstep.resend_latest_ack`).
     """
     pending: dict[str, list[tuple[str, int, int, bytes]]] = {m: [] for m in members}
     skipped: dict[str, int] = {}
     count = dict.fromkeys(members, 0)
     acked = dict.fromkeys(members, -1)  # the last epoch each member acknowledged
+    last: dict[str, tuple[int, str]] = {}  # each member's last ack (epoch, stage)
     out: dict[str, list[Output]] = {}
     for key, seq, payload in published:
         member = sender_of(key)
         if member not in pending or keys.describe(key)["stream"] in NOT_COMPARED:
             continue
         ack = _ack(key, payload)
-        if ack is not None and ack.stage == "ready":
+        again = ack is not None and (ack.epoch, ack.stage) == last.get(member)
+        if ack is not None and (ack.stage == "ready" or again):
             skipped[key] = skipped.get(key, 0) + 1
             continue
         count[member] += 1
@@ -274,6 +277,7 @@ def outputs_of(
         if ack is not None:
             _close(out, member, pending[member], ack.epoch, ack.stage, count[member])
             pending[member], acked[member] = [], ack.epoch
+            last[member] = (ack.epoch, ack.stage)
     for member, rest in pending.items():  # after the last ack: the epoch after it
         _close(out, member, rest, acked[member] + 1, "", count[member])
     return out

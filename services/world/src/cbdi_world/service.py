@@ -5,14 +5,20 @@ percepts, a snapshot and (periodically) statistics. Requests (`act`, `stats`, `i
 answered at once on the same event loop, so they never race with a step. Pacing comes
 from the injected clock: `speed` simulated seconds per wall second, or as fast as possible
 (speed 0), and in lockstep mode only once every agent acknowledged the epoch before.
+
+With `--state FILE` it saves its state every epoch and notes every request it serves
+(`cbdi_world.recovery`); restarted (`--restart` above 0, `CBDI_RESTART` from `cbdi up`)
+it goes on from that file at the epoch it was killed in, without the start barrier: the
+members send their latest acks again when its liveliness token comes back
+(`cbdi.lockstep.announce_ready`), and a request it already served (an executor asking
+again after losing the reply) gets the same reply, once.
 """
 
 from __future__ import annotations
 
 import asyncio
-import math
-from collections.abc import AsyncIterator, Sequence
-from dataclasses import dataclass, field
+from collections import Counter
+from collections.abc import AsyncIterator
 
 from msgspec.structs import replace
 
@@ -21,16 +27,9 @@ from cbdi.bus import messages, publish, serve
 from cbdi.bus.typed import dropping
 from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
-from cbdi.runtime import ServiceContext, ServiceSettings
+from cbdi.runtime import ServiceContext
 from cbdi.runtime.service import ServiceMain
-from cbdi.simulator import (
-    EpochResult,
-    Simulator,
-    SimulatorConfig,
-    load_simulator,
-    parse_option_pairs,
-    read_options,
-)
+from cbdi.simulator import EpochResult, Simulator
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply, RunFinished
 from cbdi.wire.world import (
@@ -43,54 +42,22 @@ from cbdi.wire.world import (
     WorldInfoRequest,
 )
 from cbdi_world.acks import AckTracker, members_of
-from cbdi_world.errors import UnknownAgentError, WorldError
+from cbdi_world.errors import UnknownAgentError
+from cbdi_world.recovery import (
+    Entry,
+    Keeper,
+    Published,
+    Recovered,
+    Served,
+    Stepped,
+    WorldState,
+    simulator_state,
+)
+from cbdi_world.settings import WorldSettings, agent_entries, build_world
 from cbdi_world.trace import RequestTrace
 
+# The settings and `build_world` live in `cbdi_world.settings`; imported from here too.
 __all__ = ["WorldService", "WorldSettings", "agent_entries", "build_world", "world_main"]
-
-
-@dataclass(frozen=True)
-class WorldSettings(ServiceSettings):
-    """Settings of `cbdi-world` (flags, `CBDI_*` environment or the `[world]` TOML table)."""
-
-    map: str = field(default="", metadata={"help": "map file (TOML)"})
-    agent: tuple[str, ...] = field(
-        default=(), metadata={"help": "agent NAME or NAME:DEPTH, placed on the map's start cells"}
-    )
-    speed: float = field(default=1.0, metadata={"help": "simulated s per wall s; 0 = flat out"})
-    seed: int = field(default=0, metadata={"help": "seed of the simulator's random generators"})
-    max_time: float = field(default=0.0, metadata={"help": "end the run at this simulated time"})
-    stop_when_done: bool = field(
-        default=True, metadata={"help": "end when the simulator's goals are all met"}
-    )
-    linger: float = field(
-        default=0.0,
-        metadata={
-            "help": "after the run ends, answer this many wall s, then exit (0: till stopped)"
-        },
-    )
-    lockstep: bool = field(
-        default=False, metadata={"help": "virtual time: each epoch waits for every member's ack"}
-    )
-    member: tuple[str, ...] = field(
-        default=(),
-        metadata={"help": "lockstep member AGENT/COMPONENT (default: each agent's executor)"},
-    )
-    wait_agents: float = field(
-        default=30.0, metadata={"help": "seconds to wait for every member before epoch 0 (0: none)"}
-    )
-    ack_timeout: float = field(
-        default=120.0, metadata={"help": "lockstep: seconds to wait for a member's ack"}
-    )
-    stats_every: int = field(default=10, metadata={"help": "publish statistics every N epochs"})
-    simulator: str = field(
-        default="",
-        metadata={"help": "the domain's simulator to host (entry point cbdi.simulators)"},
-    )
-    option: tuple[str, ...] = field(
-        default=(),
-        metadata={"help": "a simulator option KEY=VALUE (what it declares: its Options)"},
-    )
 
 
 class WorldService:
@@ -102,6 +69,7 @@ class WorldService:
         world: Simulator,
         settings: WorldSettings,
         clock: Clock | None = None,
+        keeper: Keeper | None = None,
     ) -> None:
         self.ctx = ctx
         self.world = world
@@ -121,6 +89,10 @@ class WorldService:
         self.finished: RunFinished | None = None
         self.trace = RequestTrace()
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
+        self.keeper = keeper
+        self.served: dict[str, Served] = {}  # this epoch's requests, by id: served once
+        self.resumed: tuple[EpochResult, bool] | None = None  # the epoch, and if it went out
+        self.saved_at = -1  # the epoch of the last whole save
 
     def start(self) -> None:
         """Declare every endpoint now and start the tasks of the service."""
@@ -139,17 +111,16 @@ class WorldService:
         ctx.start(self.run(), name="epochs")
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
-        try:
-            if req.agent not in self.agents:
-                raise UnknownAgentError(req.agent)
-            reply = self.world.request(req)
-        except UnknownAgentError as exc:
+        before = self.served.get(req.request_id)
+        if before is not None and before.request == req:  # asked again: the reply was lost
+            self.ctx.log.info("act_repeated", epoch=self.world.epoch, agent=req.agent)
+            return before.reply
+        if req.agent not in self.agents:
             self.ctx.counters["unknown_agent"] += 1
             self.ctx.log.warning("unknown_agent", key=key, agent=req.agent)
-            return ErrorReply(code="unknown_agent", message=str(exc))
-        except CbdiError as exc:  # an action (or arguments) the simulator does not perform
-            reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
-        self.trace.record(self.world.epoch, req, reply)
+            return ErrorReply(code="unknown_agent", message=str(UnknownAgentError(req.agent)))
+        reply = self.serve_act(req)
+        self.note(Served(self.world.epoch, req, reply))  # on file before the reply goes out
         self.ctx.log.info(
             "act",
             epoch=self.world.epoch,
@@ -158,6 +129,16 @@ class WorldService:
             accepted=reply.accepted,
             reason=reply.reason,
         )
+        return reply
+
+    def serve_act(self, req: ActionRequest) -> ActionReply:
+        """Start `req` (of a known agent) in the simulator; trace it; remember the reply."""
+        try:
+            reply = self.world.request(req)
+        except CbdiError as exc:  # an action (or arguments) the simulator does not perform
+            reply = ActionReply(request_id=req.request_id, accepted=False, reason=str(exc))
+        self.trace.record(self.world.epoch, req, reply)
+        self.served[req.request_id] = Served(self.world.epoch, req, reply)
         return reply
 
     async def on_stats(self, key: str, req: StatsRequest) -> Message:
@@ -185,24 +166,102 @@ class WorldService:
                 await self.acks.observe(ack)
 
     async def run(self) -> None:
-        """Publish epoch 0, then step until the run ends; keep serving requests after,
-        `linger` wall seconds (then stop: a run's world does not outlive it) or until
-        stopped."""
-        await self.wait_for_agents()
-        # The static world once, for recorders and viewers (also on request: rpc/info).
-        await publish(self.ctx.bus, keys.world_stream("info"), self.info, block=True)
-        await self.publish_epoch(self.world.initial())
-        start = self.clock.now()
+        """Publish epoch 0 (or go on from the state file), then step until the run ends;
+        keep serving requests after, `linger` wall seconds (then stop: a run's world does
+        not outlive it) or until stopped."""
+        if self.resumed is None:
+            await self.wait_for_agents()
+            # The static world once, for recorders and viewers (also on request: rpc/info).
+            await publish(self.ctx.bus, keys.world_stream("info"), self.info, block=True)
+            await self.advance(self.world.initial())
+            start = self.clock.now()
+        else:
+            await self.go_on(*self.resumed)
+            # The epoch under way began before the kill: the next one is due at once.
+            start = self.clock.now() - (self.world.epoch + 1) * self.epoch_wall()
         while self.finished is None:
             await self.pace(start)
-            result = self.world.step()
-            await self.publish_epoch(result)
-            await self.check_end()
+            await self.advance(self.world.step())
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
+        if self.keeper is not None:
+            self.keeper.close()
         if self.settings.linger > 0:
             await WallClock().sleep(self.settings.linger)
             self.ctx.log.info("lingered", seconds=self.settings.linger)
             self.ctx.stop()
+
+    async def advance(self, result: EpochResult) -> None:
+        """Save the epoch the simulator reached, publish it, note that, see if the run ended."""
+        self.served.clear()
+        self.save(result)
+        await self.publish_epoch(result)
+        self.note(Published(result.epoch))
+        await self.check_end()
+
+    def resume(self, recovered: Recovered) -> None:
+        """Take back the host's part of a saved state (the simulator is restored already),
+        then replay on it what followed, in order: requests served, steps, publications."""
+        state = recovered.state
+        self.trace, self.saved_at = state.trace, state.result.epoch
+        self.restore_marks(state.acked, state.behind, state.stalls)
+        result, published = state.result, False
+        for entry in recovered.entries:
+            if isinstance(entry, Stepped):
+                self.served.clear()
+                result, published = self.world.step(), False
+                self.restore_marks(entry.acked, entry.behind, entry.stalls)
+            elif isinstance(entry, Served):
+                if self.serve_act(entry.request) != entry.reply:  # not deterministic
+                    self.ctx.log.warning("replay_differs", request=entry.request.request_id)
+            else:
+                published = entry.epoch == result.epoch
+        if published:
+            self.last_tick = self.tick_of(result)
+        self.resumed = (result, published)
+
+    def restore_marks(
+        self, acked: dict[str, tuple[int, int]], behind: dict[str, int], stalls: dict[str, int]
+    ) -> None:
+        self.acks.acked.update((m, a) for m, a in acked.items() if m in self.acks.acked)
+        self.acks.behind = dict(behind)
+        self.acks.stalls = Counter(stalls)
+
+    async def go_on(self, result: EpochResult, published: bool) -> None:
+        """Carry on at the epoch reached: publish it if it did not go out, then wait for
+        its acks as usual (the members send theirs again: `cbdi.lockstep`)."""
+        self.ctx.log.info(
+            "recovered",
+            state=self.settings.state,
+            epoch=result.epoch,
+            saved=self.saved_at,
+            published=published,
+        )
+        if not published:
+            await self.publish_epoch(result)
+            self.note(Published(result.epoch))
+        await self.check_end()
+
+    def save(self, result: EpochResult) -> None:
+        """Keep the state (with `--state`): all of it every `state_every` epochs, else
+        the step and the lockstep marks."""
+        if self.keeper is None:
+            return
+        marks = dict(self.acks.acked), dict(self.acks.behind), dict(self.acks.stalls)
+        if self.saved_at >= 0 and result.epoch - self.saved_at < self.settings.state_every:
+            self.keeper.note(Stepped(result.epoch, *marks))
+            return
+        simulator = simulator_state(self.world)
+        self.keeper.save(WorldState(simulator, result, self.trace, *marks))
+        self.saved_at = result.epoch
+
+    def note(self, entry: Entry) -> None:
+        if self.keeper is not None:
+            self.keeper.note(entry)
+
+    def epoch_wall(self) -> float:
+        """Wall seconds per epoch (0: flat out)."""
+        speed = self.settings.speed
+        return self.world.info().epoch_duration / speed if speed > 0 else 0.0
 
     async def wait_for_agents(self) -> None:
         """The start barrier: epoch 0 waits until every member said it is ready."""
@@ -220,8 +279,7 @@ class WorldService:
         if s.lockstep:
             await self.wait_acks(self.world.epoch)
         if s.speed > 0:
-            due = start + (self.world.epoch + 1) * self.world.info().epoch_duration / s.speed
-            await self.clock.sleep_until(due)
+            await self.clock.sleep_until(start + (self.world.epoch + 1) * self.epoch_wall())
         else:
             await asyncio.sleep(0)  # flat out, but let requests in between epochs
 
@@ -230,16 +288,18 @@ class WorldService:
         if late:
             self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
 
-    async def publish_epoch(self, result: EpochResult) -> None:
-        bus, w = self.ctx.bus, self.world
-        tick = Tick(
+    def tick_of(self, result: EpochResult) -> Tick:
+        return Tick(
             epoch=result.epoch,
             time=result.time,
-            epoch_duration=w.info().epoch_duration,
+            epoch_duration=self.world.info().epoch_duration,
             speed=self.settings.speed,
             lockstep=self.settings.lockstep,
         )
-        self.last_tick = tick
+
+    async def publish_epoch(self, result: EpochResult) -> None:
+        bus, w = self.ctx.bus, self.world
+        tick = self.last_tick = self.tick_of(result)
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
             await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)
@@ -272,66 +332,29 @@ class WorldService:
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)
 
 
-def build_world(settings: WorldSettings) -> Simulator:
-    """Build the `--simulator` from its map, agents, seed and options; raise a
-    CbdiError/WorldError naming what is wrong (a map it refuses names the simulator)."""
-    if not (math.isfinite(settings.linger) and settings.linger >= 0):
-        raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
-    simulator = load_simulator(settings.simulator, "--simulator")
-    if not settings.map and getattr(simulator, "needs_map", True):
-        raise WorldError(
-            f"no map given (--map FILE): the {settings.simulator!r} simulator needs one"
-        )
-    options = read_options(simulator, parse_option_pairs(settings.option, "--option"), "--option")
-    agents, depths = agent_entries(settings.agent or ("robot1",))
-    members_of(settings.member, list(agents))  # every member names an agent
-    config = SimulatorConfig(
-        map=settings.map, agents=agents, seed=settings.seed, detection_depth=depths, options=options
-    )
-    try:
-        return simulator(config)
-    except CbdiError:
-        raise
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise WorldError(f"simulator {settings.simulator!r}, map {settings.map}: {exc}") from None
-
-
-def agent_entries(entries: Sequence[str]) -> tuple[tuple[str, ...], dict[str, int]]:
-    """Read `--agent NAME[:DEPTH]` entries: the names in order, and the depths given."""
-    names: list[str] = []
-    depths: dict[str, int] = {}
-    for entry in entries:
-        name, _, depth = entry.partition(":")
-        try:
-            keys.validate_name(name)
-            if depth:
-                depths[name] = int(depth)
-                if depths[name] < 0:
-                    raise ValueError(f"a detection depth is >= 0, not {depth}")
-        except ValueError as exc:
-            raise WorldError(f"--agent {entry!r}: {exc}") from None
-        names.append(name)
-    if len(set(names)) != len(names):
-        raise WorldError("agent names must be unique")
-    return tuple(names), depths
-
-
 def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
     """Return the service body serving `world` (built before the bus is opened); `clock`
-    paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read)."""
+    paces it (default: wall time; in lockstep flat out, `--speed 0`, none is read). A
+    restart with a state file goes on from it (`Keeper.recover`)."""
 
     async def body(ctx: ServiceContext) -> None:
         settings: WorldSettings = ctx.settings
+        keeper = Keeper(settings.state, ctx.log) if settings.state else None
+        recovered = keeper.recover(world) if keeper and settings.restart > 0 else None
+        simulator = recovered[0] if recovered else world
         ctx.log.info(
             "world",
             map=settings.map,
-            agents=",".join(world.info().agents),
+            agents=",".join(simulator.info().agents),
             speed=settings.speed,
             lockstep=settings.lockstep,
             seed=settings.seed,
             simulator=settings.simulator,
             options=",".join(settings.option),
         )
-        WorldService(ctx, world, settings, clock).start()
+        service = WorldService(ctx, simulator, settings, clock, keeper)
+        if recovered:
+            service.resume(recovered[1])
+        service.start()
 
     return body

@@ -2,7 +2,10 @@
 
 Two runs are the same run when their traces are equal. Requests of one epoch are sorted
 (agents act side by side, so their arrival order is not part of the run); the digest is a
-SHA-256 over the sorted entries, so a whole run compares by one string.
+SHA-256 chained epoch by epoch (each epoch's hash covers the digest before it and that
+epoch's sorted entries), so a whole run compares by one string. The trace is plain data
+(the running digest as bytes, not a hash object), so it goes into the world's state file
+(`cbdi_world.recovery`) and a restarted world carries it on.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ class RequestTrace:
     """Fold each served request into a running digest, epoch by epoch."""
 
     def __init__(self) -> None:
-        self._hash = hashlib.sha256()
+        self._digest = b""
         self._epoch = -1
         self._pending: list[str] = []
         self.count = 0
@@ -35,11 +38,15 @@ class RequestTrace:
         self.count += 1
 
     def _flush(self) -> None:
+        if not self._pending:
+            return
+        h = hashlib.sha256(self._digest)
         for line in sorted(self._pending):
-            self._hash.update(line.encode() + b"\n")
+            h.update(line.encode() + b"\n")
+        self._digest = h.digest()
         self._pending = []
 
     def digest(self) -> str:
         """Return the digest of everything recorded so far."""
         self._flush()
-        return self._hash.hexdigest()
+        return self._digest.hex() if self._digest else hashlib.sha256().hexdigest()

@@ -8,7 +8,9 @@ reverse order. Meanwhile a watchdog hears every service's heartbeat and kills on
 froze (`cbdi.launcher.watch`), to be restarted by policy; and should the launcher die,
 even by SIGKILL, its children die with it (`cbdi.runtime.parent`). Before the world
 starts, the launcher publishes what it starts and with which arguments (`RunLaunched`),
-so that a recording says how to build a service again.
+so that a recording says how to build a service again. The world saves its state every
+epoch in the run's own temporary directory (`CBDI_STATE`, removed at the end): killed,
+it is restarted by policy and goes on from there (`cbdi_world.recovery`).
 
 Meanwhile it listens to every planner (`cbdi.tally`): the summary's `planner` holds each
 BDI agent's plans, replans, forecast-triggered repairs and search rounds, and the total.
@@ -18,9 +20,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import shutil
 import signal
 import socket
 import sys
+import tempfile
 import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
@@ -116,13 +120,16 @@ def _specs(
     record: str = "",
     heartbeat: float = 0.5,
     agent_process: bool = False,
+    state: str = "",
 ) -> list[ProcessSpec]:
     """Return the run's processes: one per service, or with `agent_process` one per BDI
-    agent (`robot1/agent`, running its components with `cbdi agent`)."""
+    agent (`robot1/agent`, running its components with `cbdi agent`). The world saves
+    its state to the file `state` (none if '')."""
     beat = {"CBDI_HEARTBEAT": str(heartbeat)}
     # A fixed hash seed: no decision may hang on the order of a set of strings.
     env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **beat}
-    own = {"router": beat, "world": {**env, "CBDI_LINGER": str(WORLD_LINGER)}}
+    world = {**env, "CBDI_LINGER": str(WORLD_LINGER), **({"CBDI_STATE": state} if state else {})}
+    own = {"router": beat, "world": world}
     bdi = {a.name for a in scenario.agents if a.kind == "bdi"} if agent_process else set()
     units: dict[str, list[ServicePlan]] = {}  # process id -> the services it runs, in order
     for p in plan_services(scenario, endpoint, record):
@@ -175,7 +182,13 @@ async def launch(
     """Run `scenario` to its end and return the summary; never leaves a child behind."""
     summary = RunSummary(scenario=scenario.name)
     endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
-    specs = _specs(scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process)
+    run_dir = tempfile.mkdtemp(prefix="cbdi-run-")  # private (0700): the world's state
+    try:
+        state = f"{run_dir}/world.state"
+        specs = _specs(scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process, state)
+    except BaseException:
+        shutil.rmtree(run_dir, ignore_errors=True)
+        raise
     procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
@@ -206,6 +219,7 @@ async def launch(
             await proc.stop()
         if bus is not None:
             await bus.close()
+        shutil.rmtree(run_dir, ignore_errors=True)
     summary.wall_time = round(time.monotonic() - started, 3)
     summary.planner = planners.summary()
     for proc in procs:

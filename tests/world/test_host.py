@@ -1,0 +1,81 @@
+"""The host's side of recovery (`WorldService` with a state file), on the in-memory bus.
+
+A request asked again (an executor that lost the reply with the killed world) is served
+once; a restarted world replays the steps and requests noted since the last whole save
+and publishes the epoch it reached only if that had not gone out.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+from cbdi import keys
+from cbdi.bus import LogSink, MemoryBus, messages
+from cbdi.runtime.log import Log
+from cbdi.runtime.service import ServiceContext
+from cbdi.wire.world import ActionReply, ActionRequest, Tick
+from cbdi_world.recovery import Keeper
+from cbdi_world.service import WorldService, WorldSettings, build_world
+from tests_support import REPO
+
+MAP = str(REPO / "domains/recycling/maps/paper-7x7.toml")
+
+
+def host(state: Path, bus: MemoryBus, out: io.StringIO, restart: int = 0) -> WorldService:
+    settings = WorldSettings(
+        simulator="recycling", map=MAP, seed=1, state=str(state), state_every=5, restart=restart
+    )
+    ctx = ServiceContext("world", bus, Log("world", stream=out), settings)
+    keeper = Keeper(state, ctx.log)
+    world = build_world(settings)
+    recovered = keeper.recover(world) if restart else None
+    service = WorldService(ctx, recovered[0] if recovered else world, settings, keeper=keeper)
+    if recovered:
+        service.resume(recovered[1])
+    return service
+
+
+def move(request_id: str, target: tuple[int, int]) -> ActionRequest:
+    return ActionRequest(agent="robot1", action="move", request_id=request_id, target=target)
+
+
+async def test_a_request_asked_again_is_served_once(tmp_path: Path) -> None:
+    out = io.StringIO()
+    world = host(tmp_path / "world.state", MemoryBus(), out)
+    await world.advance(world.world.initial())
+    x, y = world.world.agents["robot1"].cell  # type: ignore[attr-defined]
+    first = await world.on_act("act", move("robot1-1", (x + 1, y)))
+    again = await world.on_act("act", move("robot1-1", (x + 1, y)))
+    assert isinstance(first, ActionReply) and first.accepted and again == first
+    assert world.trace.count == 1 and "event=act_repeated" in out.getvalue()
+    other = await world.on_act("act", move("robot1-2", (x + 1, y)))  # a new one: busy
+    assert isinstance(other, ActionReply) and not other.accepted
+
+
+async def test_a_restart_replays_what_followed_the_save_and_publishes_what_did_not_go_out(
+    tmp_path: Path,
+) -> None:
+    state, out = tmp_path / "world.state", io.StringIO()
+    first = host(state, MemoryBus(), out)
+    await first.advance(first.world.initial())
+    x, y = first.world.agents["robot1"].cell  # type: ignore[attr-defined]
+    for epoch in range(1, 8):  # whole saves at 0 and 5, steps noted in between
+        target = (x + 1, y) if epoch % 2 else (x, y)
+        await first.on_act("act", move(f"robot1-{epoch}", target))
+        await first.advance(first.world.step())
+    await first.on_act("act", move("robot1-8", (x + 1, y)))
+    first.save(first.world.step())  # killed after the step was saved, before publishing
+    bus = MemoryBus()
+    ticks = messages(bus, keys.world_stream("clock"), Tick, LogSink())
+    second = host(state, bus, out, restart=1)
+    assert second.resumed is not None
+    result, published = second.resumed
+    assert (result.epoch, published, second.saved_at) == (8, False, 5)
+    assert second.world.stats() == first.world.stats()
+    assert second.trace.digest() == first.trace.digest() and second.trace.count == 8
+    assert result.snapshot == first.world.snapshot()  # type: ignore[attr-defined]
+    await second.go_on(result, published)
+    _, tick = await anext(ticks)
+    assert tick.epoch == 8 and "event=recovered" in out.getvalue()
+    assert "replay_differs" not in out.getvalue()
