@@ -182,9 +182,9 @@ UNDISTURBED: dict[str, float] = {}
 
 
 @pytest.mark.timeout(400)
-# The scheduler case is left out: in 1 of about 14 runs its restart still met an ack
-# timeout (see the session note); the executor and planner cases never did.
-@pytest.mark.parametrize("service", ["robot1/executor", "robot1/planner", "router"])
+@pytest.mark.parametrize(
+    "service", ["robot1/executor", "robot1/planner", "robot1/scheduler", "router"]
+)
 def test_a_killed_service_is_restarted_and_the_run_completes_as_undisturbed(
     tmp_path: Path, service: str
 ) -> None:
