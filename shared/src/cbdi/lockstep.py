@@ -18,7 +18,9 @@ race ours) is taken at the next gate, however early it comes.
 Resynchronisation, one rule for late, frozen and restarted members alike: a `Need` not
 met within the timeout is given up for this epoch and its sender named as late; what it
 sent meanwhile is taken at the next gate. A sender whose counts go back has restarted:
-its counts start afresh. A restarted world (it goes on from its state file) lost the
+its counts start afresh, and what its earlier life sent that no ack released is dropped.
+The world's percepts count the tick and outcomes they close (`Percepts.sent`), since
+the bus may recover one key's samples after another's (after a router restart). A restarted world (it goes on from its state file) lost the
 acks its predecessor had: each member sends its latest one again, the very same
 message, when the world's liveliness token comes back (`announce_ready`); an ack seen
 twice changes no gate.
