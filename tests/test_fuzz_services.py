@@ -67,6 +67,7 @@ STREAMS = [
 ]
 ENDPOINTS = [
     keys.world_rpc("act"),
+    keys.world_act(A),
     keys.world_rpc("stats"),
     keys.world_rpc("info"),
     keys.world_rpc("clock"),

@@ -57,7 +57,7 @@ async def test_a_performer_carries_out_its_action_and_reports_how_it_ended() -> 
 
     dock = Dock()
     served = [
-        asyncio.create_task(bus.serve(keys.world_rpc("act"), act)),
+        asyncio.create_task(bus.serve(keys.world_act("*"), act)),
         asyncio.create_task(serve_performer(bus, "robot1", "charge", dock)),
     ]
     try:

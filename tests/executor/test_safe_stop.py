@@ -66,7 +66,7 @@ async def test_a_stopped_executor_starts_nothing_until_resumed(
             ActionReply(request_id=req.request_id, accepted=True, starts_at=0.0, ends_at=1.0)
         )
 
-    server = asyncio.create_task(bus.serve(keys.world_rpc("act"), act))
+    server = asyncio.create_task(bus.serve(keys.world_act("*"), act))
     try:
         async with asyncio.timeout(10):
             while keys.alive("robot1/executor") not in network.tokens:

@@ -54,7 +54,7 @@ async def test_a_rejection_during_an_early_arrest_sends_a_true_arrest_report() -
             )
         return encode(ActionReply(request_id=req.request_id, accepted=False, reason="busy"))
 
-    server = asyncio.create_task(bus.serve(keys.world_rpc("act"), act))
+    server = asyncio.create_task(bus.serve(keys.world_act("*"), act))
     try:
         async with asyncio.timeout(10):
             while keys.alive("robot1/executor") not in network.tokens:

@@ -39,7 +39,9 @@ import msgspec
 from cbdi import keys
 from cbdi.bus import Bus, BusConfig, open_bus, request
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT
-from cbdi.errors import CbdiError
+from cbdi.errors import CbdiError, ConfigError
+from cbdi.security import CREDENTIALS_ENV, Credentials, discover, read_credentials
+from cbdi.security.policy import OPERATOR
 from cbdi.wire.agent import (
     AgentReply,
     AgentRequest,
@@ -175,6 +177,12 @@ def _common(p: argparse.ArgumentParser, top: object) -> None:
         default=default(None),
         help=f"Zenoh endpoint (repeatable; default $CBDI_CONNECT or {DEFAULT_ENDPOINT})",
     )
+    p.add_argument(
+        "--credentials",
+        default=default(None),
+        help="file with the operator's Zenoh user and password (default $CBDI_CREDENTIALS, "
+        "or the operator's of the local `cbdi up` run on --connect's port)",
+    )
     p.add_argument("--group", default=default("operator"), help="the group asked under")
     p.add_argument("--from", dest="sender", default=default("operator"), help="who asks")
     p.add_argument(
@@ -232,6 +240,10 @@ def _validate(args: argparse.Namespace) -> None:
             raise UsageError(str(exc)) from None
     if not args.group:
         raise UsageError("--group must not be empty")
+    try:
+        keys.validate_name(args.group, "group")  # a chunk of the key asked on
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if not (0 < args.timeout < float("inf")):
         raise UsageError(f"--timeout must be a number of seconds above 0, got {args.timeout:g}")
 
@@ -252,7 +264,7 @@ async def _show(bus: Bus, args: argparse.Namespace) -> int:
 
 
 async def _ask(bus: Bus, args: argparse.Namespace, req: AgentRequest) -> int:
-    key = keys.component_rpc(args.agent, "scheduler", "request")
+    key = keys.agent_request(args.agent, args.group)
     reply = await request(bus, key, req, AgentReply, timeout=args.timeout)
     if not reply.accepted:
         print(f"refused: {reply.reason}", file=sys.stderr)
@@ -298,7 +310,7 @@ async def _stop(bus: Bus, args: argparse.Namespace) -> int:
         try:
             reply = await request(
                 bus,
-                keys.component_rpc(agent, "scheduler", "request"),
+                keys.agent_request(agent, args.group),
                 req,
                 AgentReply,
                 timeout=args.timeout,
@@ -359,9 +371,31 @@ async def _still(bus: Bus, agent: str, args: argparse.Namespace, mind: bool) -> 
         await asyncio.sleep(0.1)
 
 
+def _login(args: argparse.Namespace, connect: Sequence[str]) -> Credentials | None:
+    """The operator's credentials: given, in the environment, or the local run's (none:
+    a bus without security). A group they do not hold is refused here, with the reason
+    (the router would drop the request unanswered)."""
+    path = args.credentials or os.environ.get(CREDENTIALS_ENV) or discover(connect, OPERATOR)
+    if not path:
+        return None
+    found = read_credentials(path)
+    if args.what not in ("show", "stop", "resume") and args.group not in found.groups:
+        held = ", ".join(found.groups) or "none"
+        raise UsageError(
+            f"group {args.group!r} is not allowed for {found.identity!r} (its groups: {held};"
+            f" credentials {path})"
+        )
+    return found
+
+
 async def _run(args: argparse.Namespace, req: AgentRequest | None) -> int:
     connect = args.connect or os.environ.get("CBDI_CONNECT", DEFAULT_ENDPOINT).split(",")
-    bus = await open_bus(BusConfig(connect=tuple(connect), connect_timeout=args.timeout))
+    login = _login(args, connect)
+    user, password = (login.user, login.password) if login else ("", "")
+    cfg = BusConfig(
+        connect=tuple(connect), connect_timeout=args.timeout, user=user, password=password
+    )
+    bus = await open_bus(cfg)
     try:
         if args.what in ("stop", "resume"):
             return await _stop(bus, args)
@@ -387,6 +421,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return asyncio.run(_run(args, req))
     except KeyboardInterrupt:
         return EXIT_OK
+    except UsageError as exc:
+        print(f"cbdi ctl: refused: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    except ConfigError as exc:
+        print(f"cbdi ctl: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except (CbdiError, TimeoutError) as exc:
         who = getattr(args, "agent", None) or "an agent"
         print(

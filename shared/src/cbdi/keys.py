@@ -5,7 +5,9 @@ Layout (documented in docs/protocol.md):
 - per agent: `cbdi/<agent>/<component>/<stream>`, e.g. `cbdi/robot1/executor/ack`
 - shared world: `cbdi/world/<stream>` and per-agent world streams
   `cbdi/world/<stream>/<agent>` (percepts, outcomes)
-- requests (queryables): `cbdi/world/rpc/<name>`, `cbdi/<agent>/<component>/rpc/<name>`
+- requests (queryables): `cbdi/world/rpc/<name>`, `cbdi/<agent>/<component>/rpc/<name>`;
+  scoped by who may ask (docs/security.md): an agent's actions `cbdi/world/rpc/act/<agent>`,
+  a multi-agent request under a group `cbdi/<agent>/scheduler/rpc/request/<group>`
 - error streams: `cbdi/world/errors`, `cbdi/<agent>/<component>/errors`
 - liveliness tokens: `cbdi/alive/<service-id>` where the service id is `world`,
   `monitor`, or `<agent>/<component>`
@@ -29,6 +31,7 @@ __all__ = [
     "WORLD",
     "agent_ack",
     "agent_ack_all",
+    "agent_request",
     "agent_stream",
     "alive",
     "component_rpc",
@@ -48,6 +51,7 @@ __all__ = [
     "planner_requests",
     "planner_rounds",
     "planner_status",
+    "request_group",
     "scheduler_arrest",
     "scheduler_beliefs",
     "scheduler_claims",
@@ -61,7 +65,9 @@ __all__ = [
     "world_for_agent",
     "world_outcomes",
     "world_percepts",
+    "world_act",
     "world_rpc",
+    "world_rpc_scope",
     "world_stream",
 ]
 
@@ -116,6 +122,38 @@ def world_for_agent(agent: str) -> str:
 def world_rpc(name: str) -> str:
     """Return the key of a world request endpoint (`act`, `stats`, `info`)."""
     return f"{ROOT}/{WORLD}/rpc/{name}"
+
+
+def world_act(agent: str) -> str:
+    """Return the key on which `agent` asks the world for its actions (`*` for all).
+
+    One key per agent, so that the router can let only that agent's executor ask on it;
+    the world checks that a request's agent is the key's (`world_rpc_scope`).
+    """
+    return f"{world_rpc('act')}/{agent}"
+
+
+def world_rpc_scope(key: str, name: str) -> str:
+    """Return the chunk after `cbdi/world/rpc/<name>/` in `key` ('' when there is none)."""
+    prefix = world_rpc(name) + "/"
+    return key[len(prefix) :] if key.startswith(prefix) else ""
+
+
+def agent_request(agent: str, group: str) -> str:
+    """Return the key on which one asks `agent`'s scheduler something under `group`.
+
+    The group is a key chunk, so that the router lets only identities of that group ask
+    on it (docs/security.md); the scheduler takes the group from the key.
+    """
+    return f"{component_rpc(agent, 'scheduler', 'request')}/{group}"
+
+
+def request_group(key: str) -> str:
+    """Return the group chunk of an `agent_request` key ('' for the bare endpoint)."""
+    parts = key.split("/")
+    if len(parts) == 6 and parts[0] == ROOT and parts[2:5] == ["scheduler", "rpc", "request"]:
+        return parts[5]
+    return ""
 
 
 def agent_stream(agent: str, component: str, stream: str) -> str:

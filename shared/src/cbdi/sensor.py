@@ -118,7 +118,7 @@ async def run_sensor(
         raise ValueError(f"a sensor's rate must be a finite number > 0, not {rate}")
     log = log or Log(f"{agent}/sensor/{sensor.prototype.predicate}")
     loop = SensorLoop(agent, sensor, sender, group)
-    key = keys.component_rpc(agent, "scheduler", "request")
+    key = keys.agent_request(agent, group)
     while True:
         try:
             reading = list(await sensor.read())

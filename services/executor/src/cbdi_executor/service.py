@@ -231,7 +231,7 @@ class ExecutorService:
         bus, now = self.ctx.bus, self.clock.now()
         for req in effects.requests:
             to = self.performers and req.action.lower() in self.performers
-            key = performer_key(self.agent, req.action) if to else keys.world_rpc("act")
+            key = performer_key(self.agent, req.action) if to else keys.world_act(self.agent)
             try:
                 reply = await self.ask(key, req)
             except CbdiError as exc:

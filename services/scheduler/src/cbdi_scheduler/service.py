@@ -26,6 +26,7 @@ from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
 from cbdi.wire.agent import (
     ActionStatus,
+    AgentReply,
     AgentRequest,
     AgentState,
     ArrestReport,
@@ -231,8 +232,17 @@ class SchedulerService:
                     )
 
     async def on_request(self, key: str, req: AgentRequest) -> Message:
-        """Serve another agent's request (the next cycle reacts to what it changed)."""
-        reply = serve_request(self.mind, req)
+        """Serve another agent's request (the next cycle reacts to what it changed).
+
+        Asked on `.../rpc/request/<group>` (the router lets only that group's identities
+        ask there), the group is the key's: a request naming another is refused.
+        """
+        group = keys.request_group(key)
+        if group and group != req.group:
+            why = f"group {req.group!r} named, but asked under {group!r} (the key {key})"
+            reply = AgentReply(accepted=False, reason=why)
+        else:
+            reply = serve_request(self.mind, req)
         log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
         log(
             "agent_request",
@@ -329,7 +339,8 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
         service = SchedulerService(ctx, mind, settings.ack_timeout)
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         rpc = keys.component_rpc(mind.agent, "scheduler", "request")
-        ctx.start(serve(ctx.bus, rpc, AgentRequest, service.on_request, ctx), name="requests")
+        asked = serve(ctx.bus, rpc + "/**", AgentRequest, service.on_request, ctx, trace_as=rpc)
+        ctx.start(asked, name="requests")  # `**`: the bare key and `.../request/<group>`
         state = keys.component_rpc(mind.agent, "scheduler", "state")
         ctx.start(
             serve(ctx.bus, state, StateRequest, service.on_state, ctx, trace=False), name="state"

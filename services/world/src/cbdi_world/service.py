@@ -57,6 +57,8 @@ from cbdi_world.settings import WorldSettings, agent_entries, build_world
 from cbdi_world.trace import RequestTrace
 
 # The settings and `build_world` live in `cbdi_world.settings`; imported from here too.
+ACT = keys.world_rpc("act")  # every agent's action requests are traced under this key
+
 __all__ = ["WorldService", "WorldSettings", "agent_entries", "build_world", "world_main"]
 
 
@@ -97,7 +99,8 @@ class WorldService:
     def start(self) -> None:
         """Declare every endpoint now and start the tasks of the service."""
         ctx, bus = self.ctx, self.ctx.bus
-        ctx.start(serve(bus, keys.world_rpc("act"), ActionRequest, self.on_act, ctx), name="act")
+        act = serve(bus, keys.world_act("**"), ActionRequest, self.on_act, ctx, trace_as=ACT)
+        ctx.start(act, name="act")
         ctx.start(
             serve(bus, keys.world_rpc("stats"), StatsRequest, self.on_stats, ctx), name="stats"
         )
@@ -111,6 +114,14 @@ class WorldService:
         ctx.start(self.run(), name="epochs")
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
+        """Perform an agent's action; one asked on another agent's key is refused (the
+        router lets only an agent's executor ask on `cbdi/world/rpc/act/<agent>`)."""
+        scope = keys.world_rpc_scope(key, "act")
+        if scope and scope != req.agent:
+            self.ctx.counters["act_not_own"] += 1
+            why = f"an action of {req.agent!r} asked on {scope!r}'s key {key}"
+            self.ctx.log.warning("act_refused", key=key, agent=req.agent, reason=why)
+            return ErrorReply(code="not_own_agent", message=why)
         before = self.served.get(req.request_id)
         if before is not None and before.request == req:  # asked again: the reply was lost
             self.ctx.log.info("act_repeated", epoch=self.world.epoch, agent=req.agent)

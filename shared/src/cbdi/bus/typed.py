@@ -187,21 +187,24 @@ async def serve(
     sink: ErrorSink,
     *,
     trace: bool = True,
+    trace_as: str = "",
 ) -> None:
     """Answer typed requests on `key_expr` until cancelled.
 
     With `trace`, each request and its reply are mirrored on `cbdi/trace/...` so that a
     recorder subscribed to `cbdi/**` sees RPC traffic too (Zenoh does not show queries to
-    subscribers).
+    subscribers): under the key asked on, or under `trace_as` for an endpoint scoped by
+    a last chunk (`cbdi/world/rpc/act/<agent>`: its requests name the agent anyway).
     """
 
     async def answer(key: str, payload: bytes) -> bytes:
+        traced = keys.trace(trace_as or key)
         if trace:
-            await bus.publish(keys.trace(key) + "/request", payload)
+            await bus.publish(traced + "/request", payload)
         reply = await _reply_to(key, payload, request_cls, handler, sink)
         encoded = encode(reply)
         if trace:
-            await bus.publish(keys.trace(key) + "/reply", encoded)
+            await bus.publish(traced + "/reply", encoded)
         return encoded
 
     await bus.serve(key_expr, answer)

@@ -51,6 +51,8 @@ class BusConfig:
     `client` (default) connects to the router(s) in `connect` and waits up to
     `connect_timeout` seconds for one to come up; `peer` listens on `listen` and connects
     to `connect` directly, with gossip scouting so that three or more peers find each other.
+    With a `user`, the session proves who it is to the router (Zenoh's user-password
+    authentication; the router's access control then applies, docs/security.md).
     """
 
     mode: str = "client"
@@ -58,6 +60,8 @@ class BusConfig:
     listen: tuple[str, ...] = ()
     connect_timeout: float = 10.0
     extra: dict[str, Any] = field(default_factory=dict)
+    user: str = ""
+    password: str = field(default="", repr=False)
 
 
 def zenoh_config(cfg: BusConfig) -> zenoh.Config:
@@ -81,6 +85,9 @@ def zenoh_config(cfg: BusConfig) -> zenoh.Config:
     conf.insert_json5("connect/timeout_ms", json.dumps({cfg.mode: timeout_ms}))
     if cfg.mode == "peer":
         conf.insert_json5("scouting/gossip/enabled", "true")
+    if cfg.user:
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(cfg.user))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(cfg.password))
     for key, value in cfg.extra.items():
         conf.insert_json5(key, json.dumps(value))
     return conf
@@ -93,7 +100,9 @@ async def open_bus(cfg: BusConfig) -> ZenohBus:
         session = await asyncio.to_thread(zenoh.open, conf)
     except zenoh.ZError as exc:
         endpoints = ", ".join(cfg.connect) or "(none)"
-        raise ConfigError("bus", "connect", f"cannot join Zenoh via {endpoints}: {exc}") from None
+        who = f" as user {cfg.user!r} (refused if the router knows no such user or password)"
+        why = f"cannot join Zenoh via {endpoints}{who if cfg.user else ''}: {exc}"
+        raise ConfigError("bus", "connect", why) from None
     return ZenohBus(session, asyncio.get_running_loop())
 
 

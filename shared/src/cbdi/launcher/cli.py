@@ -138,6 +138,20 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(`cbdi agent`): about half the memory per robot",
     )
     p.add_argument(
+        "--secure",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="authenticate every service and let each do only its own part (default; "
+        "docs/security.md); --no-secure: any local client may do anything",
+    )
+    p.add_argument(
+        "--run-dir",
+        metavar="DIR",
+        default="",
+        help="where the run's credentials go (mode 0600; default: found again from the "
+        "router's port, so that `cbdi ctl --connect` finds the operator's)",
+    )
+    p.add_argument(
         "--record",
         metavar="FILE",
         default="",
@@ -265,6 +279,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         freeze_limit=args.freeze_limit,
         freeze_kill=args.freeze_kill,
         agent_process=args.agent_process,
+        secure=args.secure,
+        run_dir=args.run_dir,
     )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]

@@ -28,6 +28,7 @@ import tempfile
 import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from cbdi import keys, tally
@@ -41,6 +42,15 @@ from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
 from cbdi.runtime.host import SEPARATOR as HOST_SEPARATOR
+from cbdi.security import (
+    CREDENTIALS_ENV,
+    RunSecrets,
+    create_secrets,
+    grants,
+    read_credentials,
+    run_dir,
+)
+from cbdi.security.policy import LAUNCHER
 from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
@@ -70,6 +80,10 @@ class LaunchOptions:
     freeze_kill: float = 10.0
     # One process per BDI agent running its three services (`cbdi agent`), not three.
     agent_process: bool = False
+    # An authenticated bus with access control (docs/security.md): per-run credentials
+    # per service, under `run_dir` (default: `cbdi.security.run_dir(port)`).
+    secure: bool = True
+    run_dir: str = ""
 
 
 @dataclass
@@ -121,15 +135,20 @@ def _specs(
     heartbeat: float = 0.5,
     agent_process: bool = False,
     state: str = "",
+    secrets: RunSecrets | None = None,
 ) -> list[ProcessSpec]:
     """Return the run's processes: one per service, or with `agent_process` one per BDI
     agent (`robot1/agent`, running its components with `cbdi agent`). The world saves
-    its state to the file `state` (none if '')."""
+    its state to the file `state` (none if ''). With `secrets`, each service logs in
+    with its own credentials and the router checks them."""
     beat = {"CBDI_HEARTBEAT": str(heartbeat)}
     # A fixed hash seed: no decision may hang on the order of a set of strings.
     env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **beat}
     world = {**env, "CBDI_LINGER": str(WORLD_LINGER), **({"CBDI_STATE": state} if state else {})}
-    own = {"router": beat, "world": world}
+    router = dict(beat)
+    if secrets is not None:
+        router |= {"CBDI_USERS": str(secrets.users), "CBDI_ACL": str(secrets.acl)}
+    own = {"router": router, "world": world}
     bdi = {a.name for a in scenario.agents if a.kind == "bdi"} if agent_process else set()
     units: dict[str, list[ServicePlan]] = {}  # process id -> the services it runs, in order
     for p in plan_services(scenario, endpoint, record):
@@ -140,19 +159,27 @@ def _specs(
     for service, plans in units.items():
         if len(plans) == 1 and plans[0].service == service:
             program = console_script(plans[0].script, plans[0].module)
-            specs.append(ProcessSpec.of(service, program, plans[0].args, own.get(service, env)))
+            penv = own.get(service, env)
+            if secrets is not None and service != "router":
+                penv = {**penv, CREDENTIALS_ENV: str(secrets.credentials(service))}
+            specs.append(ProcessSpec.of(service, program, plans[0].args, penv))
         else:
-            specs.append(_host_spec(service, plans, env))
+            specs.append(_host_spec(service, plans, env, secrets))
     return specs
 
 
-def _host_spec(service: str, plans: list[ServicePlan], env: dict[str, str]) -> ProcessSpec:
-    """Return the process running `plans` with `cbdi agent` (sections split by `--`)."""
+def _host_spec(
+    service: str, plans: list[ServicePlan], env: dict[str, str], secrets: RunSecrets | None
+) -> ProcessSpec:
+    """Return the process running `plans` with `cbdi agent` (sections split by `--`),
+    each section with its own credentials."""
     args: list[str] = ["agent"]
     for plan in plans:
         if len(args) > 1:
             args.append(HOST_SEPARATOR)
         args += [plan.service.rsplit("/", 1)[-1], *plan.args]
+        if secrets is not None:
+            args += ["--credentials", str(secrets.credentials(plan.service))]
     program = console_script("cbdi", "cbdi.cli")
     return ProcessSpec.of(service, program, args, env, [p.service for p in plans])
 
@@ -181,13 +208,37 @@ async def launch(
 ) -> RunSummary:
     """Run `scenario` to its end and return the summary; never leaves a child behind."""
     summary = RunSummary(scenario=scenario.name)
-    endpoint = f"tcp/127.0.0.1:{opts.port or free_port()}"
-    run_dir = tempfile.mkdtemp(prefix="cbdi-run-")  # private (0700): the world's state
+    port = opts.port or free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    secrets = None
+    if opts.secure:
+        agents = [(a.name, AGENT_KINDS[a.kind]) for a in scenario.agents]
+        root = Path(opts.run_dir) if opts.run_dir else run_dir(port)
+        secrets = create_secrets(root, grants(agents))
+        say("launcher", f"security=on credentials={root / 'credentials'}")
     try:
-        state = f"{run_dir}/world.state"
-        specs = _specs(scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process, state)
+        return await _launch(scenario, opts, say, summary, endpoint, secrets)
+    finally:
+        if secrets is not None:
+            secrets.remove()
+
+
+async def _launch(
+    scenario: Scenario,
+    opts: LaunchOptions,
+    say: Callable[[str, str], None],
+    summary: RunSummary,
+    endpoint: str,
+    secrets: RunSecrets | None,
+) -> RunSummary:
+    state_dir = tempfile.mkdtemp(prefix="cbdi-run-")  # private (0700): the world's state
+    try:
+        state = f"{state_dir}/world.state"
+        specs = _specs(
+            scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process, state, secrets
+        )
     except BaseException:
-        shutil.rmtree(run_dir, ignore_errors=True)
+        shutil.rmtree(state_dir, ignore_errors=True)
         raise
     procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
@@ -202,7 +253,8 @@ async def launch(
                     p.service: list(p.args) for p in plan_services(scenario, endpoint, opts.record)
                 },
             )
-            bus, ends = await _start_all(procs, endpoint, opts, tg, summary, planners, launched)
+            login = _login(secrets)
+            bus, ends = await _start_all(procs, endpoint, opts, tg, summary, planners, launched, login)
             await _await_end(bus, ends, procs, scenario, opts, tg, summary)
             raise _Done
     except* _Done:
@@ -219,7 +271,7 @@ async def launch(
             await proc.stop()
         if bus is not None:
             await bus.close()
-        shutil.rmtree(run_dir, ignore_errors=True)
+        shutil.rmtree(state_dir, ignore_errors=True)
     summary.wall_time = round(time.monotonic() - started, 3)
     summary.planner = planners.summary()
     for proc in procs:
@@ -227,6 +279,14 @@ async def launch(
         summary.freezes[proc.spec.service] = proc.freezes
         summary.exit_codes[proc.spec.service] = proc.exit_codes
     return summary
+
+
+def _login(secrets: RunSecrets | None) -> tuple[str, str]:
+    """The launcher's own user and password ('' without security)."""
+    if secrets is None:
+        return "", ""
+    found = read_credentials(secrets.credentials(LAUNCHER))
+    return found.user, found.password
 
 
 class _Done(Exception):
@@ -241,12 +301,17 @@ async def _start_all(
     summary: RunSummary,
     planners: tally.PlannerTally,
     launched: RunLaunched,
+    login: tuple[str, str],
 ) -> tuple[Bus, asyncio.Queue[RunFinished]]:
     summary.result = "starting"
     router, rest = procs[0], procs[1:]
     await router.start()
     tg.create_task(router.supervise())
-    bus = await open_bus(BusConfig(connect=(endpoint,), connect_timeout=opts.startup_timeout))
+    user, password = login
+    cfg = BusConfig(
+        connect=(endpoint,), connect_timeout=opts.startup_timeout, user=user, password=password
+    )
+    bus = await open_bus(cfg)
     live = _Liveliness()
     tg.create_task(live.follow(bus))
     # The world's last word, heard from before it starts: a short run (`--until 1`) may

@@ -31,6 +31,7 @@ from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent
+from cbdi.security.secrets import read_credentials
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
 
@@ -54,14 +55,24 @@ class ServiceSettings:
     heartbeat: float = field(
         default=0.5, metadata={"help": "wall seconds between heartbeats (0: none)"}
     )
+    credentials: str = field(
+        default="",
+        metadata={"help": "file with this service's Zenoh user and password (docs/security.md)"},
+    )
 
     def bus_config(self) -> BusConfig:
-        """Return the bus part of these settings."""
+        """Return the bus part of these settings (ConfigError: unreadable credentials)."""
+        user = password = ""
+        if self.credentials:
+            found = read_credentials(self.credentials)
+            user, password = found.user, found.password
         return BusConfig(
             mode=self.mode,
             connect=tuple(self.connect),
             listen=tuple(self.listen),
             connect_timeout=self.connect_timeout,
+            user=user,
+            password=password,
         )
 
 

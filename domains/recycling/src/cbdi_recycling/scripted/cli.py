@@ -121,7 +121,7 @@ class ScriptedAgent:
             request_id=f"{self.name}-{next(self.ids)}",
         )
         try:
-            reply = await request(self.ctx.bus, keys.world_rpc("act"), req, ActionReply)
+            reply = await request(self.ctx.bus, keys.world_act(self.name), req, ActionReply)
         except CbdiError as exc:
             self.ctx.log.warning("request_failed", action=step.action, error=str(exc))
             return

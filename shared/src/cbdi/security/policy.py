@@ -1,0 +1,233 @@
+"""Who may do what on the bus: one `Grant` per identity, and the router's ACL built from them.
+
+Pure: no file, no network. The router enforces the result with Zenoh's own access
+control (`access_control`, default deny), its subjects matched by the user names that
+Zenoh's user-password authentication (`transport/auth/usrpwd`) proved. docs/security.md
+says what each identity may do and why.
+
+Zenoh's advanced publishers and subscribers (`zenoh.ext`) talk on keys of their own
+below a verbatim chunk, `<key>/@adv/pub/<zid>/<eid>/_` (a publisher's liveliness token,
+cache queryable and heartbeats) and `<key>/@adv/sub/<zid>/<eid>/_` (a subscriber's
+token). `**` does not match a chunk that starts with `@`, so every rule on `K` comes with
+its rule on `K/@adv/...`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from cbdi import keys
+
+__all__ = [
+    "LAUNCHER",
+    "MONITOR",
+    "OPERATOR",
+    "OPERATOR_GROUP",
+    "PERFORMER",
+    "SENSOR_GROUP",
+    "WORLD",
+    "Grant",
+    "acl_config",
+    "grants",
+    "user_of",
+]
+
+WORLD, MONITOR, LAUNCHER, OPERATOR = "world", "monitor", "launcher", "operator"
+PERFORMER = "performer"  # per agent: its performers and sensors (`cbdi.performer`, `cbdi.sensor`)
+OPERATOR_GROUP, SENSOR_GROUP = "operator", "sensors"  # the groups `cbdi ctl` and sensors ask under
+ROOT = keys.ROOT
+
+_PUT = ("put", "delete")
+_DECLARATIONS = (
+    "declare_subscriber",
+    "declare_queryable",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+)
+_SUBSCRIBE = ("declare_subscriber", "declare_liveliness_subscriber", "liveliness_query")
+_ALL = (*_PUT, *_DECLARATIONS, "query", "reply", "liveliness_query")
+
+
+@dataclass(frozen=True)
+class Grant:
+    """What one identity (a service id such as `robot1/executor`, or `operator`) may do.
+
+    `publish`: put on these keys (and run advanced publishers on them); `read`: subscribe
+    to them and receive what is put; `serve`: answer requests; `query`: ask; `tokens`:
+    declare liveliness tokens; `groups`: the groups it may ask agents under (the key
+    `cbdi/<agent>/scheduler/rpc/request/<group>`, in `query` too).
+    """
+
+    identity: str
+    publish: tuple[str, ...] = ()
+    read: tuple[str, ...] = ()
+    serve: tuple[str, ...] = ()
+    query: tuple[str, ...] = ()
+    tokens: tuple[str, ...] = ()
+    groups: tuple[str, ...] = ()
+
+    @property
+    def user(self) -> str:
+        return user_of(self.identity)
+
+
+def user_of(identity: str) -> str:
+    """Return the Zenoh user name of an identity (`robot1/executor` -> `robot1.executor`)."""
+    return identity.replace("/", ".")
+
+
+def _service(service: str, **more: tuple[str, ...]) -> Grant:
+    """A service's own keys: its streams and errors, heartbeat, traces, token, endpoints."""
+    own = f"{ROOT}/{service}/**"
+    publish = (own, keys.heartbeat(service), f"{ROOT}/trace/{service}/**")
+    return Grant(
+        service,
+        publish=publish + more.pop("publish", ()),
+        serve=(f"{ROOT}/{service}/rpc/**", *more.pop("serve", ())),
+        tokens=(keys.alive(service),),
+        **more,
+    )
+
+
+def _agent_reads(agent: str) -> tuple[str, ...]:
+    """What every service of `agent` reads: its own agent's keys, the world's shared
+    streams and those addressed to it, its group's claims and acks, who is alive."""
+    return (
+        f"{ROOT}/{agent}/**",
+        keys.CLOCK,
+        keys.world_stream("info"),
+        keys.EVENTS,
+        keys.world_for_agent(agent),
+        keys.scheduler_claims_all(),
+        keys.epoch_ack("*", "scheduler"),
+        keys.ALIVE_ALL,
+    )
+
+
+_WORLD_ASKS = (keys.world_rpc("info"), keys.world_rpc("clock"))
+
+
+def agent_grants(agent: str, components: Iterable[str]) -> list[Grant]:
+    """The grants of one agent's services and of its performers and sensors."""
+    out = []
+    for component in components:
+        asks = _WORLD_ASKS + (f"{ROOT}/{agent}/**",)
+        if component == "executor":  # only its executor asks the world for its actions
+            asks += (keys.world_act(agent),)
+        out.append(
+            _service(keys.service_id(component, agent), read=_agent_reads(agent), query=asks)
+        )
+    performer = keys.service_id(PERFORMER, agent)
+    out.append(
+        _service(
+            performer,
+            read=(keys.CLOCK, keys.agent_stream(agent, "executor", "stop"), keys.ALIVE_ALL),
+            query=(keys.agent_request(agent, SENSOR_GROUP), *_WORLD_ASKS),
+            groups=(SENSOR_GROUP,),
+        )
+    )
+    return out
+
+
+def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
+    """Return every identity of a run of `agents` (name, its components).
+
+    The world alone writes world state, events and percepts; the monitor and the
+    launcher read everything; `operator` (`cbdi ctl`) asks any agent under group
+    `operator` and reads who is alive.
+    """
+    everything = (f"{ROOT}/**",)
+    out = [
+        _service(WORLD, read=(keys.epoch_ack_all(), f"{ROOT}/{WORLD}/**", keys.ALIVE_ALL)),
+        _service(MONITOR, read=everything, query=_WORLD_ASKS),
+        _service(
+            LAUNCHER,
+            read=everything,
+            query=(*_WORLD_ASKS, keys.world_rpc("stats")),
+        ),
+        Grant(
+            OPERATOR,
+            read=(keys.ALIVE_ALL,),
+            query=(
+                keys.component_rpc("*", "scheduler", "state"),
+                keys.agent_request("*", OPERATOR_GROUP),
+                keys.component_rpc("*", "executor", "stop"),
+            ),
+            groups=(OPERATOR_GROUP,),
+        ),
+    ]
+    for agent, components in agents:
+        out += agent_grants(agent, components)
+    return out
+
+
+def _adv(exprs: Iterable[str], tail: str) -> list[str]:
+    return [f"{k}/@adv/{tail}" for k in exprs]
+
+
+def _rules(g: Grant) -> list[tuple[str, tuple[str, ...], str, list[str]]]:
+    """(name, messages, flow, key expressions) of one grant's allow rules."""
+    pub, read = list(g.publish), list(g.read)
+    return [
+        # Its publications, and its advanced publishers' tokens, caches and heartbeats.
+        ("publish", _ALL, "ingress", pub + _adv(pub, "**")),
+        ("publish-asked", ("query",), "egress", _adv(pub, "**")),
+        # What it reads: subscriptions (and an advanced subscriber's token, heartbeat
+        # subscription and cache queries), then what the router hands it.
+        ("read", _SUBSCRIBE, "ingress", read + _adv(read, "**")),
+        ("read-recover", ("query",), "ingress", _adv(read, "**")),
+        ("read-token", ("liveliness_token",), "ingress", _adv(read, "sub/**")),
+        ("read-get", (*_PUT, "liveliness_token"), "egress", read + _adv(read, "**")),
+        ("read-reply", ("reply",), "egress", _adv(read, "**")),
+        ("serve", ("declare_queryable", "reply"), "ingress", list(g.serve)),
+        ("serve-asked", ("query",), "egress", list(g.serve)),
+        ("query", ("query",), "ingress", list(g.query)),
+        ("query-reply", ("reply",), "egress", list(g.query)),
+        ("token", ("liveliness_token",), "ingress", list(g.tokens)),
+    ]
+
+
+def acl_config(all_grants: Sequence[Grant]) -> dict[str, Any]:
+    """Return the router's `access_control` configuration: deny by default, allow what
+    each identity's grant says, to that identity's user name only.
+
+    Every authenticated identity is also told of declarations under `cbdi/**` (who
+    subscribes, serves, is alive), so that publishers and queriers find their peers;
+    that says which keys are in use, never what is on them.
+    """
+    rules: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    everyone = [g.user for g in all_grants]
+    tell = [f"{ROOT}/**", f"{ROOT}/**/@adv/**"]
+    rules.append(_rule("all-declarations", _DECLARATIONS, "egress", tell))
+    policies.append({"id": "all", "rules": ["all-declarations"], "subjects": everyone})
+    subjects = []
+    for g in all_grants:
+        ids = []
+        for name, messages, flow, exprs in _rules(g):
+            if exprs:
+                rule_id = f"{g.user}:{name}"
+                rules.append(_rule(rule_id, messages, flow, exprs))
+                ids.append(rule_id)
+        subjects.append({"id": g.user, "usernames": [g.user]})
+        policies.append({"id": g.user, "rules": ids, "subjects": [g.user]})
+    # One subject per identity, the policy "all" naming them all.
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def _rule(rule_id: str, messages: Sequence[str], flow: str, exprs: Sequence[str]) -> dict[str, Any]:
+    return {
+        "id": rule_id,
+        "messages": list(dict.fromkeys(messages)),
+        "flows": [flow],
+        "permission": "allow",
+        "key_exprs": list(dict.fromkeys(exprs)),
+    }

@@ -1,0 +1,167 @@
+"""The authenticated, access-controlled bus (real Zenoh, real processes): a client without
+credentials, or with wrong ones, cannot connect; one with robot2's credentials cannot
+move robot1, add a desire to it, finish the run or read robot1's keys; each refusal is
+logged (by the router, or the world); and the run still ends as it should."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import stat
+from pathlib import Path
+
+import pytest
+
+from cbdi import keys
+from cbdi.bus import BusConfig, ZenohBus, open_bus, publish, request
+from cbdi.errors import ConfigError, RequestFailedError, RequestTimeoutError
+from cbdi.security import read_credentials
+from cbdi.wire import encode
+from cbdi.wire.agent import AgentReply, AgentRequest, StateRequest
+from cbdi.wire.common import RunFinished
+from cbdi.wire.world import ActionReply, ActionRequest
+from tests_support import BIN, Proc, free_port, wait_for
+
+pytestmark = pytest.mark.e2e
+
+# Keys of robot1 that robot2 shares with it as members of one group (docs/security.md).
+GROUP_SHARED = {keys.scheduler_claims("robot1"), keys.epoch_ack("robot1", "scheduler")}
+
+
+async def _as(endpoint: str, creds: Path) -> ZenohBus:
+    found = read_credentials(creds)
+    cfg = BusConfig(connect=(endpoint,), connect_timeout=5.0, user=found.user, password=found.password)
+    return await open_bus(cfg)
+
+
+async def _no_login(endpoint: str, creds: Path) -> list[str]:
+    """Try to join without credentials and with a wrong password; return the errors."""
+    errors = []
+    user = read_credentials(creds).user
+    for cfg in (
+        BusConfig(connect=(endpoint,), connect_timeout=2.0),
+        BusConfig(connect=(endpoint,), connect_timeout=2.0, user=user, password="guess"),
+    ):
+        with pytest.raises(ConfigError) as refused:
+            await open_bus(cfg)
+        errors.append(str(refused.value))
+    return errors
+
+
+async def _refused(bus: ZenohBus, key: str, payload: bytes) -> str:
+    """Ask on `key`; return how it failed (an ACL-denied query is never answered)."""
+    try:
+        await bus.request(key, payload, timeout=2.0)
+    except RequestTimeoutError:
+        return "timeout"
+    except RequestFailedError as exc:
+        return f"failed: {exc}"
+    return "answered"
+
+
+async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
+    """What a client holding robot2's credentials gets when it goes for robot1."""
+    out: dict[str, object] = {"no_login": await _no_login(endpoint, creds / "robot1.executor.json")}
+    executor = await _as(endpoint, creds / "robot2.executor.json")
+    scheduler = await _as(endpoint, creds / "robot2.scheduler.json")
+    try:
+        move = ActionRequest(agent="robot1", action="move", request_id="rogue-1", target=(0, 6))
+        out["act_robot1"] = await _refused(executor, keys.world_act("robot1"), encode(move))
+        # On its own key, naming robot1: the world refuses it.
+        try:
+            await request(executor, keys.world_act("robot2"), move, ActionReply, timeout=5.0)
+            out["act_own_key"] = "answered"
+        except RequestFailedError as exc:
+            out["act_own_key"] = exc.code
+        desire = AgentRequest(
+            from_agent="robot2", group="recyclers", op="add_desire", desire="d", goal=["(in robot1 c_0_6)"]
+        )
+        out["desire"] = [
+            await _refused(scheduler, keys.agent_request("robot1", group), encode(desire))
+            for group in ("recyclers", "operator")
+        ]
+        out["state"] = await _refused(
+            scheduler, keys.component_rpc("robot1", "scheduler", "state"), encode(StateRequest())
+        )
+        seen: list[str] = []
+        ticks: list[str] = []
+        sub = scheduler.subscribe(["cbdi/robot1/**", keys.world_percepts("robot1")])
+        clock = scheduler.subscribe(keys.CLOCK)  # what robot2 may read still comes
+
+        async def collect(s: object, into: list[str]) -> None:
+            async for sample in s:  # type: ignore[attr-defined]
+                into.append(sample.key)
+
+        tasks = [asyncio.create_task(collect(sub, seen)), asyncio.create_task(collect(clock, ticks))]
+        fake_end = RunFinished(reason="done", epoch=1, time=1.0)
+        await publish(scheduler, keys.EVENTS, fake_end, block=True)
+        await publish(executor, keys.world_percepts("robot1"), fake_end, block=True)
+        await scheduler.declare_token(keys.alive("robot1/executor"))
+        await asyncio.sleep(4.0)
+        for t in tasks:
+            t.cancel()
+        out["read"] = sorted(set(seen) - GROUP_SHARED)
+        out["ticks"] = len(ticks)
+    finally:
+        await executor.close()
+        await scheduler.close()
+    return out
+
+
+def _denied(log: str, user: str, action: str, key: str) -> bool:
+    pattern = rf"event=acl_denied user={re.escape(user)} action={action} flow=\w+ key={re.escape(key)}"
+    return re.search(pattern, log) is not None
+
+
+def test_a_rogue_client_is_refused_and_the_run_goes_on(tmp_path: Path) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    run = tmp_path / "run"
+    argv = [str(BIN / "cbdi"), "up", "paper-7x7", "--agents", "2", "--port", str(port)]
+    launcher = Proc([*argv, "--speed", "1", "--json", "--run-dir", str(run)], tmp_path / "up.log")
+    creds = run / "credentials"
+    try:
+        wait_for(
+            lambda: "started service=robot2/executor" in launcher.output(),
+            timeout=90,
+            what="the run to start",
+        )
+        assert stat.S_IMODE((creds / "robot1.executor.json").stat().st_mode) == 0o600
+        assert stat.S_IMODE(run.stat().st_mode) == 0o700
+        before = launcher.output()
+        attack = asyncio.run(_attack(endpoint, creds))
+        assert launcher.alive(), "a fake RunFinished ended the run"
+        wait_for(lambda: not launcher.alive(), timeout=240, what="the run to end")
+    finally:
+        code = launcher.stop()
+    log = launcher.log_path.read_text()
+    assert code == 0, log[-3000:]
+    summary = json.loads(log[log.index("{\n") :])
+    assert summary["result"] == "done" and summary["stats"]["litter_recycled"] == 3
+
+    no_login = attack["no_login"]
+    assert all("cannot join Zenoh" in e for e in no_login), no_login  # type: ignore[union-attr]
+    assert "as user 'robot1.executor'" in no_login[1]  # type: ignore[index]
+    assert attack["act_robot1"] == "timeout"
+    assert attack["act_own_key"] == "not_own_agent"
+    assert attack["desire"] == ["timeout", "timeout"]
+    assert attack["state"] == "timeout"
+    assert attack["read"] == [], attack["read"]
+    assert attack["ticks"], "robot2's credentials still read the clock"
+    assert not (run / "credentials").exists(), "the run's secrets outlive it"
+
+    # Each refusal is in the router's log (the world's, for an action on the wrong key).
+    assert "event=auth_refused" in log
+    assert _denied(log, "robot2.executor", "query", keys.world_act("robot1"))
+    assert _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "recyclers"))
+    assert _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "operator"))
+    assert _denied(log, "robot2.scheduler", "put", keys.EVENTS)
+    assert _denied(log, "robot2.executor", "put", keys.world_percepts("robot1"))
+    assert _denied(log, "robot2.scheduler", "declare_subscriber", keys.world_percepts("robot1"))
+    assert _denied(log, "robot2.scheduler", "liveliness_token", keys.alive("robot1/executor"))
+    assert "event=act_refused key=cbdi/world/rpc/act/robot2 agent=robot1" in log
+    # Nothing of the run itself was refused (before the attack, nor of another user).
+    assert "acl_denied" not in before, before[-3000:]
+    others = [line for line in log.splitlines() if "acl_denied" in line and "robot2." not in line]
+    assert not others, others[:5]
