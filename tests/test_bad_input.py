@@ -25,7 +25,7 @@ from cbdi.bus import LogSink, MemoryNetwork, messages, request
 from cbdi.bus.memory import MemoryBus
 from cbdi.bus.typed import dropping
 from cbdi.clock import ManualClock
-from cbdi.errors import CbdiError, RejectedInputError
+from cbdi.errors import CbdiError, RejectedInputError, RequestFailedError
 from cbdi.runtime import ServiceContext
 from cbdi.runtime.together import Together, TogetherService
 from cbdi.wire import decode, encode
@@ -270,6 +270,12 @@ async def test_the_world_answers_nonsense_requests_with_errors_and_serves_the_ne
         odd = ActionRequest(agent="robot1", action="fly", request_id="r0", target=(1, 2))
         refused = await request(bus, act, odd, ActionReply)
         assert not refused.accepted and refused.reason
+        # An action of robot1 asked on another agent's key: refused, not performed.
+        with pytest.raises(RequestFailedError) as posing:
+            await request(bus, keys.world_act("robot2"), valid, ActionReply)
+        assert posing.value.code == "not_own_agent" and ctx.counters["act_not_own"] == 1
+        own = await request(bus, keys.world_act("robot1"), valid, ActionReply)
+        assert own.request_id == "r1"  # served (the simulator's answer, not a refusal)
         ack = EpochAck(agent="robot1", epoch=0)
         await flood(
             bus, keys.agent_ack("robot1"), [*GARBAGE, raw(ack, epoch=-7), raw(ack, stage="x")]

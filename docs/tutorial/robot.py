@@ -10,8 +10,8 @@ import asyncio
 import contextlib
 import sys
 
-from cbdi.bus import BusConfig, open_bus
 from cbdi.performer import ActionCall, Outcome, serve_performer
+from cbdi.security.login import open_as
 from cbdi.sensor import Prototype, run_sensor
 
 
@@ -54,7 +54,7 @@ class Things:
 
 async def main(router: str) -> None:
     room = Room()
-    bus = await open_bus(BusConfig(connect=(router,), connect_timeout=60.0))
+    bus = await open_as("robot1/performer", [router], timeout=60.0)  # docs/security.md
     try:
         async with asyncio.TaskGroup() as tasks:
             tasks.create_task(serve_performer(bus, "robot1", "carry", Carry(room)))

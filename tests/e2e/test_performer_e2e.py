@@ -19,8 +19,9 @@ pytestmark = pytest.mark.e2e
 PERFORMER = '''
 import asyncio, itertools, sys
 from cbdi import keys
-from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
+from cbdi.bus import LogSink, messages, request
 from cbdi.performer import ActionCall, Outcome, serve_performer
+from cbdi.security.login import open_as
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest
 
 class Drive:
@@ -32,7 +33,7 @@ class Drive:
         rid = f"drive-{next(self.ids)}"
         ends = messages(self.bus, keys.world_outcomes(call.agent), ActionOutcome, LogSink())
         req = ActionRequest(agent=call.agent, action="move", request_id=rid, target=(x, y))
-        reply = await request(self.bus, keys.world_rpc("act"), req, ActionReply)
+        reply = await request(self.bus, keys.world_act(call.agent), req, ActionReply)
         if not reply.accepted:
             return Outcome.failure(reply.reason)
         async for _key, out in ends:
@@ -43,12 +44,9 @@ class Drive:
         return Outcome.failure("no outcome")
 
 async def main():
-    while True:  # the router comes up with `cbdi up`, started after us
-        try:
-            bus = await open_bus(BusConfig(connect=(sys.argv[1],), connect_timeout=1.0))
-            break
-        except Exception:
-            await asyncio.sleep(0.1)
+    # The router comes up with `cbdi up`, started after us; robot1's performer's
+    # credentials with it.
+    bus = await open_as("robot1/performer", [sys.argv[1]], timeout=120.0)
     print("serving", flush=True)
     await serve_performer(bus, "robot1", "drive", Drive(bus))
 

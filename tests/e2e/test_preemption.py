@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from cbdi import keys
-from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
+from cbdi.bus import LogSink, messages, request
+from cbdi.security.login import open_as
 from cbdi.wire import decode
 from cbdi.wire.agent import (
     ActionStatus,
@@ -33,7 +34,7 @@ async def ask_to_go(endpoint: str, after: float = 4.0) -> AgentReply:
     """Ask robot1 (as an operator of its group) to go to the corner farthest from it, once
     `after` simulated seconds passed (on its way to the litter, however loaded the machine).
     """
-    bus = await open_bus(BusConfig(connect=(endpoint,)))
+    bus = await open_as("operator", [endpoint])  # the run's operator (docs/security.md)
     try:
         snapshots = messages(bus, keys.SNAPSHOT, WorldSnapshot, LogSink())
         while True:
@@ -44,14 +45,14 @@ async def ask_to_go(endpoint: str, after: float = 4.0) -> AgentReply:
         far = max(CORNERS, key=lambda c: abs(c[0] - x) + abs(c[1] - y))
         urgent = AgentRequest(
             from_agent="operator",
-            group="recyclers",
+            group="operator",
             op="add_desire",
             desire="clear_the_way",
             goal=[f"(in robot1 c_{far[0]}_{far[1]})"],
             priority=0.95,
             deadline=200,
         )
-        key = keys.component_rpc("robot1", "scheduler", "request")
+        key = keys.agent_request("robot1", "operator")
         return await request(bus, key, urgent, AgentReply, timeout=10)
     finally:
         await bus.close()

@@ -41,7 +41,10 @@ async def test_a_requested_desire_shows_in_the_state_and_is_pursued() -> None:
             goal=["(in robot1 c_3_3)"],
             priority=0.9,
         )
-        rpc = keys.component_rpc("robot1", "scheduler", "request")
+        # Under a group's key, the group is the key's: naming another is refused.
+        posing = await request(bus, keys.agent_request("robot1", "sensors"), ask, AgentReply)
+        assert not posing.accepted and "asked under 'sensors'" in posing.reason
+        rpc = keys.agent_request("robot1", "operator")
         assert (await request(bus, rpc, ask, AgentReply)).accepted
         state_key = keys.component_rpc("robot1", "scheduler", "state")
         state = await request(bus, state_key, StateRequest(beliefs=False), AgentState)

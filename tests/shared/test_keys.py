@@ -58,3 +58,13 @@ def test_describe_names_the_parts_of_a_key(
     key: str, agent: str, component: str, stream: str
 ) -> None:
     assert keys.describe(key) == {"agent": agent, "component": component, "stream": stream}
+
+
+def test_scoped_request_keys_name_who_may_ask() -> None:
+    assert keys.world_act("robot1") == "cbdi/world/rpc/act/robot1"
+    assert keys.world_rpc_scope("cbdi/world/rpc/act/robot1", "act") == "robot1"
+    assert keys.world_rpc_scope(keys.world_rpc("act"), "act") == ""
+    assert keys.agent_request("robot1", "operator") == "cbdi/robot1/scheduler/rpc/request/operator"
+    assert keys.request_group(keys.agent_request("robot1", "operator")) == "operator"
+    assert keys.request_group(keys.component_rpc("robot1", "scheduler", "request")) == ""
+    assert keys.request_group("cbdi/robot1/scheduler/rpc/state/x") == ""

@@ -38,7 +38,7 @@ class RouterSettings(ServiceSettings):
     def bus_config(self) -> BusConfig:
         """The router's session: listening, with authentication and access control."""
         cfg = super().bus_config()
-        extra: dict[str, Any] = {}
+        extra: dict[str, Any] = dict(cfg.extra)
         if self.users:
             if not Path(self.users).is_file():
                 raise ConfigError(self.users, "users", "file not found")

@@ -307,6 +307,7 @@ async def _start_all(
     router, rest = procs[0], procs[1:]
     await router.start()
     tg.create_task(router.supervise())
+    await _router_is_ours(router, endpoint, opts)  # before logging in: it may be another's
     user, password = login
     cfg = BusConfig(
         connect=(endpoint,), connect_timeout=opts.startup_timeout, user=user, password=password
@@ -336,7 +337,6 @@ async def _start_all(
         tg.create_task(watch_heartbeats(bus, dog))
         tg.create_task(watch_processes(bus, dog, procs))
     await _wait_alive(live, [router], opts)
-    await _router_is_ours(router, endpoint, opts)
     router.sink("launcher", f"router endpoint={endpoint}")  # for `cbdi ctl --connect`
     # One at a time: the monitor (so it misses nothing), the world; then all agent services.
     singles = 2 if opts.record else 1

@@ -31,7 +31,7 @@ from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent
-from cbdi.security.secrets import read_credentials
+from cbdi.security.secrets import read_credentials, read_zenoh_settings
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
 
@@ -59,6 +59,10 @@ class ServiceSettings:
         default="",
         metadata={"help": "file with this service's Zenoh user and password (docs/security.md)"},
     )
+    zenoh_config: str = field(
+        default="",
+        metadata={"help": 'JSON file of more Zenoh settings, {"path/of/key": value} (TLS)'},
+    )
 
     def bus_config(self) -> BusConfig:
         """Return the bus part of these settings (ConfigError: unreadable credentials)."""
@@ -71,6 +75,7 @@ class ServiceSettings:
             connect=tuple(self.connect),
             listen=tuple(self.listen),
             connect_timeout=self.connect_timeout,
+            extra=read_zenoh_settings(self.zenoh_config) if self.zenoh_config else {},
             user=user,
             password=password,
         )

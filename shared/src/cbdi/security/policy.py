@@ -123,8 +123,15 @@ def agent_grants(agent: str, components: Iterable[str]) -> list[Grant]:
     out.append(
         _service(
             performer,
-            read=(keys.CLOCK, keys.agent_stream(agent, "executor", "stop"), keys.ALIVE_ALL),
-            query=(keys.agent_request(agent, SENSOR_GROUP), *_WORLD_ASKS),
+            read=(
+                keys.CLOCK,
+                keys.world_for_agent(agent),
+                keys.agent_stream(agent, "executor", "stop"),
+                keys.ALIVE_ALL,
+            ),
+            # A performer is the agent's body: it may carry an action out in a
+            # simulated world (the agent's own actions only).
+            query=(keys.agent_request(agent, SENSOR_GROUP), keys.world_act(agent), *_WORLD_ASKS),
             groups=(SENSOR_GROUP,),
         )
     )
@@ -136,7 +143,7 @@ def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
 
     The world alone writes world state, events and percepts; the monitor and the
     launcher read everything; `operator` (`cbdi ctl`) asks any agent under group
-    `operator` and reads who is alive.
+    `operator`, and reads who is alive, the world's public streams and desire events.
     """
     everything = (f"{ROOT}/**",)
     out = [
@@ -149,7 +156,11 @@ def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
         ),
         Grant(
             OPERATOR,
-            read=(keys.ALIVE_ALL,),
+            read=(
+                keys.ALIVE_ALL,
+                *(keys.world_stream(s) for s in ("clock", "snapshot", "stats", "info", "events")),
+                keys.agent_stream("*", "scheduler", "desires"),
+            ),
             query=(
                 keys.component_rpc("*", "scheduler", "state"),
                 keys.agent_request("*", OPERATOR_GROUP),

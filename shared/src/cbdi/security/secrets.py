@@ -35,6 +35,7 @@ __all__ = [
     "create_secrets",
     "discover",
     "read_credentials",
+    "read_zenoh_settings",
     "run_dir",
 ]
 
@@ -130,6 +131,21 @@ def read_credentials(path: str | Path) -> Credentials:
         raise ConfigError(where, "groups", "expected a list of group names")
     identity = data.get("identity", data["user"])
     return Credentials(str(identity), data["user"], data["password"], tuple(groups))
+
+
+def read_zenoh_settings(path: str | Path) -> dict[str, Any]:
+    """Read a JSON object of Zenoh settings by path (`{"transport/link/tls/root_ca_certificate":
+    "ca.pem"}`); raise ConfigError naming the file and what is wrong."""
+    where = str(path)
+    try:
+        data: Any = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(where, "zenoh_config", "file not found") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(where, "zenoh_config", f"not a JSON file: {exc}") from None
+    if not isinstance(data, dict) or not all(isinstance(k, str) and k for k in data):
+        raise ConfigError(where, "zenoh_config", 'expected {"path/of/key": value, ...}')
+    return data
 
 
 def _runs_root() -> Path:
