@@ -40,12 +40,20 @@ def test_compose_runs_router_world_two_bdi_agents_and_wait_against_the_router() 
     assert "--stop-when-done" in full
 
 
-def test_the_committed_compose_file_is_what_cbdi_compose_writes(tmp_path: Path) -> None:
+def test_the_committed_compose_file_is_what_cbdi_compose_writes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)  # its secrets go to ./secrets
     out = tmp_path / "docker-compose.yml"
     assert compose.main(["paper-7x7", "--agents", "2", "-o", str(out)]) == 0
     assert out.read_text() == (REPO / "docker-compose.yml").read_text(), (
         "regenerate it: cbdi compose paper-7x7 --agents 2 -o docker-compose.yml"
     )
+    creds = tmp_path / "secrets" / "credentials" / "robot1.executor.json"
+    assert creds.stat().st_mode & 0o777 == 0o600
+    written = creds.read_text()
+    assert compose.main(["paper-7x7", "--agents", "2", "-o", str(out)]) == 0
+    assert creds.read_text() == written  # kept: a split run's projects share them
 
 
 def test_the_validator_rejects_a_broken_file(tmp_path: Path) -> None:

@@ -98,11 +98,13 @@ def image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 def _generate(image: str, where: Path, *args: str) -> Path:
     """Write the compose file the image's own `cbdi compose` makes (its paths are the
     image's), recording into `where`/runs."""
+    # The run's secrets are written on the host (the same path inside), where the
+    # compose file mounts them from.
     generated = _run(
         [PODMAN or "podman", "run", "--rm", "--ulimit", "nofile=4096:4096",
-         "--ulimit", "nproc=4096:4096", image, "cbdi", "compose", "paper-7x7",
-         "--agents", "2", "--image", image, "--runs", str(where / "runs"), "--timeout", "600",
-         *args],
+         "--ulimit", "nproc=4096:4096", "-v", f"{where}:{where}", image, "cbdi", "compose",
+         "paper-7x7", "--agents", "2", "--image", image, "--runs", str(where / "runs"),
+         "--secrets", str(where / "secrets"), "--timeout", "600", *args],
         where, 120,
     )  # fmt: skip
     assert generated.returncode == 0, generated.stderr
@@ -161,10 +163,12 @@ def test_a_run_split_over_two_projects_with_joined_routers(
     tmp_path: Path, image: str, podman_socket: str
 ) -> None:
     first, second = _free_port(), _free_port()
+    # Joined routers do not log in to each other (docs/security.md): no security here.
     here = _generate(image, tmp_path, "--network", "host", "--port", str(first),
-                     "--only", "world,robot1")  # fmt: skip
+                     "--only", "world,robot1", "--no-secure")  # fmt: skip
     there = _generate(image, tmp_path, "--network", "host", "--port", str(second),
-                      "--join", f"tcp/127.0.0.1:{first}", "--only", "robot2")  # fmt: skip
+                      "--join", f"tcp/127.0.0.1:{first}", "--only", "robot2",
+                      "--no-secure")  # fmt: skip
     a, b = f"cbdi-test-a-{os.getpid()}", f"cbdi-test-b-{os.getpid()}"
     try:
         started = _compose(there, b, podman_socket, "up", "-d")

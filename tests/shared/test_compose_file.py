@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -57,8 +58,10 @@ def test_a_run_splits_over_two_projects_with_joined_routers() -> None:
     scenario = _scenario()
     here = ComposeOptions(network="host", port=17447, only=("world", "robot1"))
     there = ComposeOptions(
-        network="host", port=17448, only=("robot2",), join=("tcp/127.0.0.1:17447",)
+        network="host", port=17448, only=("robot2",), join=("tcp/127.0.0.1:17447",), secrets=""
     )
+    with pytest.raises(ConfigError, match="joined routers do not log in"):
+        compose_file(scenario, replace(there, secrets="./secrets"))
     first = _commands(compose_file(scenario, here))
     second = _commands(compose_file(scenario, there))
     assert set(first) == {"router", "monitor", "world", "wait"} | {
@@ -68,6 +71,14 @@ def test_a_run_splits_over_two_projects_with_joined_routers() -> None:
     assert second["router"][-2:] == ["--connect", "tcp/127.0.0.1:17447"]
     assert "tcp/127.0.0.1:17448" in second["router"]
     assert "CBDI_CONNECT: tcp/127.0.0.1:17448" in compose_file(scenario, there)
+
+
+def test_every_service_logs_in_with_its_own_credentials_mounted_read_only() -> None:
+    text = compose_file(_scenario(), ComposeOptions())
+    assert "CBDI_CREDENTIALS: /secrets/credentials/robot2.executor.json" in text
+    assert "CBDI_ACL: /secrets/router/acl.json" in text
+    assert text.count('"./secrets:/secrets:ro"') == text.count("    image: ")
+    assert "CBDI_CREDENTIALS" not in compose_file(_scenario(), ComposeOptions(secrets=""))
 
 
 def test_unknown_parts_and_files_outside_domains_are_refused(

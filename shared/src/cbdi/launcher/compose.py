@@ -27,13 +27,16 @@ from typing import Any
 
 from cbdi.errors import ConfigError
 from cbdi.launcher.cli import scenario_arguments, scenario_from_args
-from cbdi.launcher.scenario import Scenario
+from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
+from cbdi.security import CREDENTIALS_ENV, RunSecrets, create_secrets, grants
+from cbdi.security.policy import COMPOSE_GRANTS
 
-__all__ = ["ComposeOptions", "compose_file", "main"]
+__all__ = ["ComposeOptions", "compose_file", "main", "write_secrets"]
 
 DOMAINS_IN_IMAGE = "/opt/cbdi/domains"  # where the Dockerfile puts domains/
 RUNS_IN_CONTAINER = "/runs"
+SECRETS_IN_CONTAINER = "/secrets"
 WORLD_PART = "world"  # `--only world`: the world, the monitor and `wait`
 # Podman as root gives containers nofile=1048576; where the host's hard limit is lower
 # the container cannot start ("error setting rlimit"). A service needs far fewer.
@@ -55,10 +58,22 @@ class ComposeOptions:
     record: str = ""  # the recording's file name in `runs` ("" : SCENARIO.mcap)
     wait_agents: float = 600.0  # the world's start barrier, in wall seconds at most
     timeout: float = 0.0  # `cbdi wait --timeout`
+    # The run's secrets on the host (`cbdi compose` writes them), mounted read-only in
+    # every container; "" : no security (docs/security.md).
+    secrets: str = "./secrets"
 
 
 def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") -> str:
     """Return the compose file (YAML) running `scenario` with `opts`."""
+    if opts.secrets and opts.join:
+        raise ConfigError(
+            "--join",
+            ",".join(opts.join),
+            "joined routers do not log in to each other (their link matches no access-"
+            "control subject), so a secured router refuses the other's traffic: connect "
+            "every service to one router, over TLS across hosts (docs/security.md), or "
+            "add --no-secure",
+        )
     host = opts.network == "host"
     listen = opts.listen or f"tcp/{'127.0.0.1' if host else '0.0.0.0'}:{opts.port}"
     connect = f"tcp/{'127.0.0.1' if host else 'router'}:{opts.port}"
@@ -103,6 +118,9 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
     if plan.service != "router":
         # Containers start together: wait for the router, do not fail for its absence.
         env |= {"CBDI_CONNECT": connect, "CBDI_CONNECT_TIMEOUT": "120"}
+    if opts.secrets:
+        env |= _secured(plan.service)
+        service["volumes"] = [f"{opts.secrets}:{SECRETS_IN_CONTAINER}:ro"]
     service["environment"] = env
     if plan.service == "router" and opts.join:
         service["command"] += [a for j in opts.join for a in ("--connect", j)]
@@ -113,7 +131,7 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
     elif plan.service == "router" and opts.publish:
         service["ports"] = [f"127.0.0.1:{opts.port}:{opts.port}"]
     if plan.service == "monitor":
-        service["volumes"] = [f"{opts.runs}:{RUNS_IN_CONTAINER}"]
+        service["volumes"] = [f"{opts.runs}:{RUNS_IN_CONTAINER}", *service.get("volumes", [])]
         service["stop_grace_period"] = "30s"  # it finishes the MCAP file on SIGTERM
     else:
         service["stop_grace_period"] = "10s"
@@ -123,6 +141,28 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
     service["restart"] = "no" if plan.service == "wait" else "on-failure"
     service["ulimits"] = dict(ULIMITS)
     return service
+
+
+def _secured(service: str) -> dict[str, str]:
+    """The environment naming a service's secrets in its container: its credentials (the
+    router's: to join other routers), and the router's user list and rules."""
+    inside = RunSecrets(Path(SECRETS_IN_CONTAINER))
+    env = {CREDENTIALS_ENV: str(inside.credentials(service))}
+    if service == "router":
+        env |= {"CBDI_USERS": str(inside.users), "CBDI_ACL": str(inside.acl)}
+    return env
+
+
+def write_secrets(scenario: Scenario, where: Path) -> bool:
+    """Write the run's secrets in `where`, unless it holds every identity's already (the
+    projects of a run split over hosts share one set); return whether it wrote them."""
+    agents = [(a.name, AGENT_KINDS[a.kind]) for a in scenario.agents]
+    everyone = [*grants(agents), *COMPOSE_GRANTS]
+    existing = RunSecrets(where)
+    if existing.acl.is_file() and all(existing.credentials(g.identity).is_file() for g in everyone):
+        return False
+    create_secrets(where, everyone)
+    return True
 
 
 def _name(service: str) -> str:
@@ -219,6 +259,18 @@ def _parser() -> argparse.ArgumentParser:
         "--wait-agents", type=float, default=600.0, help="the world's start barrier, seconds"
     )
     p.add_argument("--timeout", type=float, default=0.0, help="cbdi wait: wall seconds at most")
+    p.add_argument(
+        "--secrets",
+        default=ComposeOptions.secrets,
+        help="host directory of the run's credentials, written now (mode 0600) unless it "
+        "holds them already; mounted read-only in every container (docs/security.md)",
+    )
+    p.add_argument(
+        "--secure",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="authenticated services, access control at the router (default)",
+    )
     return p
 
 
@@ -256,12 +308,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         record=args.record,
         wait_agents=args.wait_agents,
         timeout=args.timeout,
+        secrets=args.secrets if args.secure else "",
     )
     try:
-        text = compose_file(scenario_from_args(args), opts, _command(args))
+        scenario = scenario_from_args(args)
+        text = compose_file(scenario, opts, _command(args))
     except ConfigError as exc:
         print(f"cbdi compose: {exc}", file=sys.stderr)
         return 2
+    if opts.secrets and write_secrets(scenario, Path(opts.secrets)):
+        print(f"cbdi compose: wrote the run's credentials in {opts.secrets}", file=sys.stderr)
     if args.output == "-":
         sys.stdout.write(text)
     else:

@@ -21,6 +21,7 @@ from typing import Any
 from cbdi import keys
 
 __all__ = [
+    "COMPOSE_GRANTS",
     "LAUNCHER",
     "MONITOR",
     "OPERATOR",
@@ -172,6 +173,22 @@ def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
     for agent, components in agents:
         out += agent_grants(agent, components)
     return out
+
+
+# What a compose run has besides: `cbdi wait` (it reads how the run ends), and the
+# router's own identity, with which it joins another host's router and carries all of
+# its side's traffic.
+COMPOSE_GRANTS = (
+    _service("wait", read=(f"{ROOT}/**",), query=(keys.world_rpc("stats"),)),
+    Grant(
+        "router",
+        publish=(f"{ROOT}/**",),
+        read=(f"{ROOT}/**",),
+        serve=(f"{ROOT}/**",),
+        query=(f"{ROOT}/**",),
+        tokens=(f"{ROOT}/**",),
+    ),
+)
 
 
 def _adv(exprs: Iterable[str], tail: str) -> list[str]:
