@@ -18,7 +18,7 @@ from cbdi.bus import BusConfig, ZenohBus, open_bus, publish, request
 from cbdi.errors import ConfigError, RequestFailedError, RequestTimeoutError
 from cbdi.security import read_credentials
 from cbdi.wire import encode
-from cbdi.wire.agent import AgentReply, AgentRequest, StateRequest
+from cbdi.wire.agent import AgentRequest, StateRequest
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import ActionReply, ActionRequest
 from tests_support import BIN, Proc, free_port, wait_for
@@ -31,7 +31,9 @@ GROUP_SHARED = {keys.scheduler_claims("robot1"), keys.epoch_ack("robot1", "sched
 
 async def _as(endpoint: str, creds: Path) -> ZenohBus:
     found = read_credentials(creds)
-    cfg = BusConfig(connect=(endpoint,), connect_timeout=5.0, user=found.user, password=found.password)
+    cfg = BusConfig(
+        connect=(endpoint,), connect_timeout=5.0, user=found.user, password=found.password
+    )
     return await open_bus(cfg)
 
 
@@ -75,7 +77,11 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
         except RequestFailedError as exc:
             out["act_own_key"] = exc.code
         desire = AgentRequest(
-            from_agent="robot2", group="recyclers", op="add_desire", desire="d", goal=["(in robot1 c_0_6)"]
+            from_agent="robot2",
+            group="recyclers",
+            op="add_desire",
+            desire="d",
+            goal=["(in robot1 c_0_6)"],
         )
         out["desire"] = [
             await _refused(scheduler, keys.agent_request("robot1", group), encode(desire))
@@ -93,7 +99,10 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
             async for sample in s:  # type: ignore[attr-defined]
                 into.append(sample.key)
 
-        tasks = [asyncio.create_task(collect(sub, seen)), asyncio.create_task(collect(clock, ticks))]
+        tasks = [
+            asyncio.create_task(collect(sub, seen)),
+            asyncio.create_task(collect(clock, ticks)),
+        ]
         fake_end = RunFinished(reason="done", epoch=1, time=1.0)
         await publish(scheduler, keys.EVENTS, fake_end, block=True)
         await publish(executor, keys.world_percepts("robot1"), fake_end, block=True)
@@ -110,7 +119,9 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
 
 
 def _denied(log: str, user: str, action: str, key: str) -> bool:
-    pattern = rf"event=acl_denied user={re.escape(user)} action={action} flow=\w+ key={re.escape(key)}"
+    pattern = (
+        rf"event=acl_denied user={re.escape(user)} action={action} flow=\w+ key={re.escape(key)}"
+    )
     return re.search(pattern, log) is not None
 
 

@@ -19,7 +19,10 @@ from cbdi.security import acl_config, create_secrets, discover, grants, read_cre
 from cbdi.security.denials import Denial, DenialLog, parse
 from cbdi.security.policy import Grant
 
-AGENTS = [("robot1", ("planner", "scheduler", "executor")), ("robot2", ("planner", "scheduler", "executor"))]
+AGENTS = [
+    ("robot1", ("planner", "scheduler", "executor")),
+    ("robot2", ("planner", "scheduler", "executor")),
+]
 
 
 def _meet(a: str, b: str) -> bool:
@@ -38,7 +41,9 @@ def test_only_the_world_writes_world_state_events_and_percepts() -> None:
 
 
 def test_only_an_agents_executor_and_body_ask_for_its_actions() -> None:
-    askers = {i for i, g in _by_id().items() if any(_meet(q, keys.world_act("robot1")) for q in g.query)}
+    askers = {
+        i for i, g in _by_id().items() if any(_meet(q, keys.world_act("robot1")) for q in g.query)
+    }
     assert askers == {"robot1/executor", "robot1/performer"}
 
 
@@ -64,8 +69,10 @@ def test_the_acl_denies_by_default_and_names_each_identity_by_its_user() -> None
     every_rule = [r for r in acl["rules"] if r["permission"] != "allow" or not r["key_exprs"]]
     assert not every_rule
     # Every rule on a key has its rule on the advanced pub/sub keys below it.
-    robot1 = [r for r in acl["rules"] if r["id"] == "robot1.planner:read"][0]
-    assert "cbdi/robot1/**" in robot1["key_exprs"] and "cbdi/robot1/**/@adv/**" in robot1["key_exprs"]
+    robot1 = next(r for r in acl["rules"] if r["id"] == "robot1.planner:read")
+    assert (
+        "cbdi/robot1/**" in robot1["key_exprs"] and "cbdi/robot1/**/@adv/**" in robot1["key_exprs"]
+    )
 
 
 def test_secrets_are_private_random_and_read_back(tmp_path: Path) -> None:
@@ -90,8 +97,13 @@ def test_secrets_are_private_random_and_read_back(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("text", "field"),
-    [("", "credentials"), ("[1]", "credentials"), ('{"user": "u"}', "password"),
-     ('{"user": "a:b", "password": "p"}', "user"), ('{"user": "u", "password": "p", "groups": 3}', "groups")],
+    [
+        ("", "credentials"),
+        ("[1]", "credentials"),
+        ('{"user": "u"}', "password"),
+        ('{"user": "a:b", "password": "p"}', "user"),
+        ('{"user": "u", "password": "p", "groups": 3}', "groups"),
+    ],
 )
 def test_a_bad_credentials_file_is_refused_naming_the_file_and_field(
     tmp_path: Path, text: str, field: str
@@ -105,7 +117,9 @@ def test_a_bad_credentials_file_is_refused_naming_the_file_and_field(
         read_credentials(tmp_path / "none.json")
 
 
-def test_a_local_run_is_found_from_its_routers_port(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_local_run_is_found_from_its_routers_port(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setenv("CBDI_RUNS_DIR", str(tmp_path))
     assert discover(["tcp/127.0.0.1:7555"], "operator") is None
     secrets = create_secrets(run_dir(7555), grants(AGENTS))
@@ -153,7 +167,12 @@ def test_refusals_are_read_from_zenohs_log_and_the_cache_worked_out_is_not() -> 
 def test_a_declaration_and_a_failed_login_are_logged_too() -> None:
     out = io.StringIO()
     denials = DenialLog(Log("router", stream=out))
-    parsed = parse(_line(9, f"{ZID_B} on Username(r2) is unauthorized to Declare Subscriber (ingress) on cbdi/robot1/**"), {})
-    assert parsed == (Denial("r2", "declare_subscriber", "ingress", "cbdi/robot1/**"), "Declare Subscriber")
-    denials.line("DEBUG acc-0 ThreadId(05) zenoh_transport::unicast::establishment::accept: UsrPwd extension - Recv OpenSyn. Invalid password. at x.rs:424.")
+    text = f"{ZID_B} on Username(r2) is unauthorized to Declare Subscriber (ingress) on cbdi/r1/**"
+    parsed = parse(_line(9, text), {})
+    declared = Denial("r2", "declare_subscriber", "ingress", "cbdi/r1/**")
+    assert parsed == (declared, "Declare Subscriber")
+    accept = "zenoh_transport::unicast::establishment::accept"
+    denials.line(
+        f"DEBUG acc-0 ThreadId(05) {accept}: UsrPwd extension - Recv OpenSyn. Invalid password."
+    )
     assert 'event=auth_refused reason="Recv OpenSyn. Invalid password" count=1' in out.getvalue()

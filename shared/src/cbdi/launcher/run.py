@@ -254,7 +254,9 @@ async def _launch(
                 },
             )
             login = _login(secrets)
-            bus, ends = await _start_all(procs, endpoint, opts, tg, summary, planners, launched, login)
+            bus, ends = await _start_all(
+                procs, endpoint, opts, tg, summary, planners, launched, login
+            )
             await _await_end(bus, ends, procs, scenario, opts, tg, summary)
             raise _Done
     except* _Done:

@@ -29,7 +29,10 @@ def config_as(identity: str, endpoints: Sequence[str], connect_timeout: float = 
         return cfg
     found = read_credentials(Path(path))
     return BusConfig(
-        connect=cfg.connect, connect_timeout=connect_timeout, user=found.user, password=found.password
+        connect=cfg.connect,
+        connect_timeout=connect_timeout,
+        user=found.user,
+        password=found.password,
     )
 
 

@@ -114,9 +114,9 @@ def agent_grants(agent: str, components: Iterable[str]) -> list[Grant]:
     """The grants of one agent's services and of its performers and sensors."""
     out = []
     for component in components:
-        asks = _WORLD_ASKS + (f"{ROOT}/{agent}/**",)
-        if component == "executor":  # only its executor asks the world for its actions
-            asks += (keys.world_act(agent),)
+        # Only its executor asks the world for its actions.
+        act = (keys.world_act(agent),) if component == "executor" else ()
+        asks: tuple[str, ...] = (*_WORLD_ASKS, f"{ROOT}/{agent}/**", *act)
         out.append(
             _service(keys.service_id(component, agent), read=_agent_reads(agent), query=asks)
         )

@@ -15,6 +15,7 @@ the operator's credentials of the run it talks to.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -78,10 +79,8 @@ class RunSecrets:
         """Delete the secrets (they are worth nothing once the router is gone)."""
         shutil.rmtree(self.root / "credentials", ignore_errors=True)
         shutil.rmtree(self.root / "router", ignore_errors=True)
-        try:
+        with contextlib.suppress(OSError):  # not empty: someone else's files too
             self.root.rmdir()
-        except OSError:
-            pass  # not empty: someone else's files too
 
 
 def _write_private(path: Path, text: str) -> None:
