@@ -32,7 +32,9 @@ async def test_a_fuzz_burst_over_zenoh_kills_no_service(tmp_path: Path) -> None:
     port = free_port()
     log = tmp_path / "up.log"
     up = subprocess.Popen(
-        [CBDI, "up", "paper-7x7", "--json", "--port", str(port), "--speed", "2"],
+        # No security: the fuzzing client may publish anywhere (with it, the router
+        # refuses it, tests/e2e/test_security.py).
+        [CBDI, "up", "paper-7x7", "--json", "--port", str(port), "--speed", "2", "--no-secure"],
         stdout=subprocess.PIPE,
         stderr=log.open("w"),
         text=True,

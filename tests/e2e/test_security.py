@@ -87,6 +87,7 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
             await _refused(scheduler, keys.agent_request("robot1", group), encode(desire))
             for group in ("recyclers", "operator")
         ]
+        out["admin"] = await _refused(scheduler, "@/**", b"")  # Zenoh's admin space
         out["state"] = await _refused(
             scheduler, keys.component_rpc("robot1", "scheduler", "state"), encode(StateRequest())
         )
@@ -157,7 +158,7 @@ def test_a_rogue_client_is_refused_and_the_run_goes_on(tmp_path: Path) -> None:
     assert attack["act_robot1"] == "timeout"
     assert attack["act_own_key"] == "not_own_agent"
     assert attack["desire"] == ["timeout", "timeout"]
-    assert attack["state"] == "timeout"
+    assert attack["state"] == attack["admin"] == "timeout"
     assert attack["read"] == [], attack["read"]
     assert attack["ticks"], "robot2's credentials still read the clock"
     assert not (run / "credentials").exists(), "the run's secrets outlive it"

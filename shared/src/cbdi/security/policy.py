@@ -208,7 +208,7 @@ def _rules(g: Grant) -> list[tuple[str, tuple[str, ...], str, list[str]]]:
         ("read-recover", ("query",), "ingress", _adv(read, "**")),
         ("read-token", ("liveliness_token",), "ingress", _adv(read, "sub/**")),
         ("read-get", (*_PUT, "liveliness_token"), "egress", read + _adv(read, "**")),
-        ("read-reply", ("reply",), "egress", _adv(read, "**")),
+        ("read-reply", ("reply",), "egress", read + _adv(read, "**")),  # caches' replies
         ("serve", ("declare_queryable", "reply"), "ingress", list(g.serve)),
         ("serve-asked", ("query",), "egress", list(g.serve)),
         ("query", ("query",), "ingress", list(g.query)),
@@ -230,7 +230,13 @@ def acl_config(all_grants: Sequence[Grant]) -> dict[str, Any]:
     everyone = [g.user for g in all_grants]
     tell = [f"{ROOT}/**", f"{ROOT}/**/@adv/**"]
     rules.append(_rule("all-declarations", _DECLARATIONS, "egress", tell))
-    policies.append({"id": "all", "rules": ["all-declarations"], "subjects": everyone})
+    # An advanced subscriber's recovery query names its own key expression (`cbdi/**/
+    # @adv/*/<zid>/<eid>/**`) and reaches the one publisher whose cache it asks; what
+    # that publisher answers, the reader's own rules let through or not.
+    rules.append(_rule("all-recovery", ("query",), "egress", [f"{ROOT}/**/@adv/**"]))
+    policies.append(
+        {"id": "all", "rules": ["all-declarations", "all-recovery"], "subjects": everyone}
+    )
     subjects = []
     for g in all_grants:
         ids = []
