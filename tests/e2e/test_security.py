@@ -87,7 +87,8 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
             await _refused(scheduler, keys.agent_request("robot1", group), encode(desire))
             for group in ("recyclers", "operator")
         ]
-        out["admin"] = await _refused(scheduler, "@/**", b"")  # Zenoh's admin space
+        # The router's admin space (a session answers `@/**` of its own too).
+        out["admin"] = await _refused(scheduler, "@/*/router/**", b"")
         out["state"] = await _refused(
             scheduler, keys.component_rpc("robot1", "scheduler", "state"), encode(StateRequest())
         )
@@ -169,6 +170,7 @@ def test_a_rogue_client_is_refused_and_the_run_goes_on(tmp_path: Path) -> None:
     assert _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "recyclers"))
     assert _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "operator"))
     assert _denied(log, "robot2.scheduler", "put", keys.EVENTS)
+    assert _denied(log, "robot2.scheduler", "query", "@/*/router/**")
     assert _denied(log, "robot2.executor", "put", keys.world_percepts("robot1"))
     assert _denied(log, "robot2.scheduler", "declare_subscriber", keys.world_percepts("robot1"))
     assert _denied(log, "robot2.scheduler", "liveliness_token", keys.alive("robot1/executor"))

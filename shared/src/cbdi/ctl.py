@@ -379,7 +379,7 @@ def _login(args: argparse.Namespace, connect: Sequence[str]) -> Credentials | No
     if not path:
         return None
     found = read_credentials(path)
-    if args.what not in ("show", "stop", "resume") and args.group not in found.groups:
+    if args.what != "show" and args.group not in found.groups:  # show asks no group
         held = ", ".join(found.groups) or "none"
         raise UsageError(
             f"group {args.group!r} is not allowed for {found.identity!r} (its groups: {held};"
