@@ -176,3 +176,10 @@ def test_a_declaration_and_a_failed_login_are_logged_too() -> None:
         f"DEBUG acc-0 ThreadId(05) {accept}: UsrPwd extension - Recv OpenSyn. Invalid password."
     )
     assert 'event=auth_refused reason="Recv OpenSyn. Invalid password" count=1' in out.getvalue()
+
+
+def test_rules_zenoh_does_not_take_are_refused_naming_the_setting() -> None:
+    bad = {"enabled": True, "rules": [{"id": "x", "messages": ["fly"], "key_exprs": ["a/**"]}]}
+    with pytest.raises(ConfigError) as err:
+        zenoh_config(BusConfig(mode="router", connect=(), extra={"access_control": bad}))
+    assert err.value.field == "access_control" and "unknown variant `fly`" in str(err.value)

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig
+from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig, zenoh_config
 from cbdi.errors import CbdiError, ConfigError
 from cbdi.runtime import Log, ServiceContext, ServiceSettings, load_config, run_service
 
@@ -86,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from cbdi.security.denials import capture
 
         try:
-            settings.bus_config()  # bad files: said now, before the log is captured
+            zenoh_config(settings.bus_config())  # bad files: said now, before the capture
         except CbdiError as exc:
             print(f"cbdi router: {exc}")
             return 2

@@ -89,7 +89,10 @@ def zenoh_config(cfg: BusConfig) -> zenoh.Config:
         conf.insert_json5("transport/auth/usrpwd/user", json.dumps(cfg.user))
         conf.insert_json5("transport/auth/usrpwd/password", json.dumps(cfg.password))
     for key, value in cfg.extra.items():
-        conf.insert_json5(key, json.dumps(value))
+        try:
+            conf.insert_json5(key, json.dumps(value))
+        except zenoh.ZError as exc:  # a setting Zenoh does not take (say, an ACL's typo)
+            raise ConfigError("zenoh settings", key, str(exc).split(" at /")[0]) from None
     return conf
 
 
