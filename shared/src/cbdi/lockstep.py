@@ -19,11 +19,11 @@ Resynchronisation, one rule for late, frozen and restarted members alike: a `Nee
 met within the timeout is given up for this epoch and its sender named as late; what it
 sent meanwhile is taken at the next gate. A sender whose counts go back has restarted:
 its counts start afresh, and what its earlier life sent that no ack released is dropped.
-The world's percepts count the tick and outcomes they close (`Percepts.sent`), since
-the bus may recover one key's samples after another's (after a router restart). A restarted world (it goes on from its state file) lost the
-acks its predecessor had: each member sends its latest one again, the very same
-message, when the world's liveliness token comes back (`announce_ready`); an ack seen
-twice changes no gate.
+The world's percepts count the outcomes they close (`Percepts.sent`), since
+the bus may recover one key's samples after another's (after a router restart). A
+restarted world (it goes on from its state file) lost the acks its predecessor had:
+each member sends its latest one again, the very same message, when the world's
+liveliness token comes back (`announce_ready`); an ack seen twice changes no gate.
 """
 
 from __future__ import annotations
@@ -127,6 +127,7 @@ class EpochGate:
         # listened is gone for good, so its first ack we see is taken as received
         # (otherwise a key it sent on before, and not since, would be waited for).
         self.rebase = False
+        self.late_world = False  # the same for the world only (a first tick past epoch 0)
         self.based: set[str] = set()
 
     def _of(self, sender: str) -> _Sender:
@@ -150,7 +151,7 @@ class EpochGate:
                 s.buffer.append(item)
                 s.received[key] = max(s.received.get(key, 0), seq)
                 if isinstance(msg, PERCEPTS):
-                    if self.rebase and WORLD not in self.based:
+                    if (self.rebase or self.late_world) and WORLD not in self.based:
                         self.based.add(WORLD)  # a late join: what it counted before is gone
                         for k, n in msg.sent.items():
                             s.received[k] = max(s.received.get(k, 0), n)
@@ -352,8 +353,9 @@ class Lockstep:
                 await self.gate.put(e)
         self.early = []
         self.gate.joined = tick.epoch
-        # A first tick past epoch 0: we joined late, what senders counted before is gone.
-        self.gate.rebase = self.gate.rebase or tick.epoch > 0
+        # A first tick past epoch 0: the world's counts in its percepts include ticks
+        # sent before we listened (other senders' acks count only what we can have).
+        self.gate.late_world = tick.epoch > 0
         self.start(tick.epoch)
         return []
 

@@ -314,10 +314,11 @@ class WorldService:
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
             await publish(bus, keys.world_outcomes(outcome.agent), outcome, block=True)
-        clock = keys.world_stream("clock")
         for p in result.percepts:
+            # The outcomes they close (not the tick: a gate that held the tick of the
+            # epoch as well would run a member's clock ahead of its peers' beliefs).
             outcomes = keys.world_outcomes(p.agent)
-            sent = {k: bus.sent[k] for k in (clock, outcomes) if bus.sent[k]}
+            sent = {outcomes: bus.sent[outcomes]} if bus.sent[outcomes] else {}
             await publish(bus, keys.world_percepts(p.agent), replace(p, sent=sent), block=True)
         await publish(bus, keys.world_stream("snapshot"), result.snapshot)
         if result.epoch % max(1, self.settings.stats_every) == 0:

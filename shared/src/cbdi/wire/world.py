@@ -118,7 +118,7 @@ class ItemView(Message, frozen=True, tag="cbdi.world.ItemView/1"):
 
 
 # What the world had published on an agent's keys when it sent the agent's percepts (the
-# last of its epoch): its tick and outcomes, per key, cumulative (as `EpochAck.sent`). A
+# last of its epoch): the count of its outcomes key, cumulative (as `EpochAck.sent`). A
 # gate holding fewer waits for the rest: the bus may recover one key's samples later than
 # another's (after a router restart), so arrival order across keys proves nothing.
 WorldSent = Annotated[dict[Symbol, Count], msgspec.Meta(max_length=8)]
