@@ -233,6 +233,10 @@ def test_live_view_follows_a_running_system(tmp_path: Path) -> None:
             timeout=60,
             what="the run to start",
         )
+        # The text view of the secured run logs in as its viewer, as does the rerun view.
+        text = run("cbdi", "view", "--text", "--frames", "2", "--connect", f"tcp/127.0.0.1:{port}")
+        assert text.returncode == 0, text.stderr
+        assert text.stdout.count("epoch") >= 2, text.stdout
         rrd = tmp_path / "live.rrd"
         result = run(
             "cbdi",

@@ -24,9 +24,9 @@ def beliefs(epoch: int) -> BeliefsUpdate:
     )
 
 
-def ack(epoch: int, sent: dict[str, int], stage: str = "done") -> Stamped:
+def ack(epoch: int, sent: dict[str, int], stage: str = "done", seq: int = 1) -> Stamped:
     msg = EpochAck(agent="r1", component="scheduler", epoch=epoch, stage=stage, sent=sent)  # type: ignore[arg-type]
-    return Stamped("cbdi/r1/scheduler/ack", 1, 0, msg)
+    return Stamped("cbdi/r1/scheduler/ack", seq, 0, msg)
 
 
 def item(key: str, seq: int, order: int, msg: Message) -> Stamped:
@@ -161,6 +161,25 @@ async def test_a_restarted_senders_earlier_life_is_not_released_among_its_new_on
     released = await gate.wait([Need(S, 26)], timeout=1)
     epochs = [m.epoch for _, m in released.messages]  # type: ignore[attr-defined]
     assert epochs == list(range(14, 27)), epochs
+
+
+async def test_a_restarted_senders_first_ack_is_kept_whichever_key_comes_first() -> None:
+    """Keys arrive in no common order: the new life's first ack may come before its first
+    message. That message (counts gone back) must not drop the ack it came after, nor may
+    the old life's acks meet a need of the new one (a stall until the ack timeout)."""
+    for ack_first in (True, False):
+        gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
+        for seq in range(1, 11):  # the old life: epochs 0 to 9
+            await gate.put(item(BELIEFS, seq, seq, beliefs(seq - 1)))
+            await gate.put(ack(seq - 1, {BELIEFS: seq}, seq=seq))
+        await gate.put(item(BELIEFS, 11, 11, beliefs(10)))  # killed before its ack of 10
+        new_ack = ack(11, {BELIEFS: 1}, seq=1)
+        new_beliefs = item(BELIEFS, 1, 12, beliefs(11))
+        for it in (new_ack, new_beliefs) if ack_first else (new_beliefs, new_ack):
+            await gate.put(it)
+        released = await gate.wait([Need(S, 11)], timeout=1)
+        assert not released.late, ack_first
+        assert [m.epoch for _, m in released.messages] == [11], ack_first  # type: ignore[attr-defined]
 
 
 async def test_a_member_sends_its_latest_ack_again_when_the_world_comes_back() -> None:

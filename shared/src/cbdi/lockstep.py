@@ -138,18 +138,22 @@ class EpochGate:
         key, seq, msg = item.key, item.seq, item.message
         async with self.changed:
             if isinstance(msg, EpochAck):
-                self._ack(msg)
+                s = self._of(keys.member(msg.agent, msg.component))
             else:
                 s = self._of(self.sender_of(key))
-                if seq and seq < s.received.get(key, 0):
-                    # The sender restarted: its counts start afresh, and what its last
-                    # life sent that no ack released is dropped (a new count would
-                    # release it among the new life's messages: a belief update of the
-                    # old series applied to the new one).
-                    s.received, s.buffer = {}, []
-                    s.acks = {k: a for k, a in s.acks.items() if k[0] < 0}
+            if seq and seq < s.received.get(key, 0):
+                # The sender restarted (on any of its keys, its acks' too: the new life's
+                # first ack may come before or after its first message): its counts start
+                # afresh, and what its last life sent that no ack released is dropped (a
+                # new count would release it among the new life's messages: a belief
+                # update of the old series applied to the new one), its acks too.
+                s.received, s.buffer = {}, []
+                s.acks = {k: a for k, a in s.acks.items() if k[0] < 0}
+            s.received[key] = max(s.received.get(key, 0), seq)
+            if isinstance(msg, EpochAck):
+                self._ack(msg)
+            else:
                 s.buffer.append(item)
-                s.received[key] = max(s.received.get(key, 0), seq)
                 if isinstance(msg, PERCEPTS):
                     if (self.rebase or self.late_world) and WORLD not in self.based:
                         self.based.add(WORLD)  # a late join: what it counted before is gone

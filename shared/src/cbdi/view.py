@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import string
 from collections.abc import AsyncIterator, Coroutine, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, TextIO
 
 import uvloop
@@ -21,6 +21,8 @@ from cbdi.bus.base import Bus
 from cbdi.bus.zenoh_bus import open_bus
 from cbdi.errors import CbdiError
 from cbdi.runtime import ServiceSettings, load_config
+from cbdi.security.login import config_as
+from cbdi.security.policy import VIEWER
 from cbdi.wire.agent import DesireEvent
 from cbdi.wire.world import WorldInfo, WorldInfoRequest, WorldSnapshot
 
@@ -148,7 +150,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
 
     async def run() -> None:
-        bus = await open_bus(settings.bus_config())
+        cfg = settings.bus_config()
+        if not settings.credentials:  # a secured local run's viewer, if there is one
+            found = config_as(VIEWER, settings.connect)
+            cfg = replace(cfg, user=found.user, password=found.password)
+        bus = await open_bus(cfg)
         try:
             await follow_text(bus, sys.stdout, settings.frames)
         finally:

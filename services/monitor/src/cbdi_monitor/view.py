@@ -27,6 +27,8 @@ from typing import Any
 from cbdi import keys
 from cbdi.bus.zenoh_bus import BusConfig, open_bus
 from cbdi.errors import CbdiError
+from cbdi.security.login import config_as
+from cbdi.security.policy import VIEWER
 from cbdi_monitor.reader import RecordedMessage, read_messages
 from cbdi_monitor.rerun_log import RerunLogger
 from cbdi_monitor.schemas import peek_schema
@@ -161,6 +163,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--live", action="store_true", help="follow a running system")
     p.add_argument("--seconds", type=float, default=0.0, help="--live: stop after N seconds")
     p.add_argument("--connect", default="tcp/127.0.0.1:7447", help="--live: Zenoh endpoint")
+    p.add_argument(
+        "--credentials",
+        default="",
+        help="--live: the run's viewer credentials (default: $CBDI_CREDENTIALS, else those"
+        " of the local run on the --connect port; docs/security.md)",
+    )
     p.add_argument("--text", action="store_true", help="live text view in the terminal")
     return p
 
@@ -176,7 +184,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.live:
             out = args.rrd or "live.rrd"
-            n = asyncio.run(_live(out, BusConfig(connect=(args.connect,)), args.seconds))
+            cfg = config_as(VIEWER, [args.connect], credentials=args.credentials)
+            n = asyncio.run(_live(out, cfg, args.seconds))
             print(f"logged {n} live messages to {out}", file=sys.stderr)
             return 0
         if not args.file:

@@ -21,9 +21,15 @@ from cbdi.security.secrets import CREDENTIALS_ENV, discover, read_credentials
 __all__ = ["config_as", "open_as"]
 
 
-def config_as(identity: str, endpoints: Sequence[str], connect_timeout: float = 10.0) -> BusConfig:
-    """Return the bus configuration of `identity` (no user when no credentials are found)."""
-    path = os.environ.get(CREDENTIALS_ENV) or discover(endpoints, identity)
+def config_as(
+    identity: str,
+    endpoints: Sequence[str],
+    connect_timeout: float = 10.0,
+    credentials: str | Path = "",
+) -> BusConfig:
+    """Return the bus configuration of `identity`: from the `credentials` file if given,
+    else `$CBDI_CREDENTIALS`, else the local run's (no user when none are found)."""
+    path = credentials or os.environ.get(CREDENTIALS_ENV) or discover(endpoints, identity)
     cfg = BusConfig(connect=tuple(endpoints), connect_timeout=connect_timeout)
     if not path:
         return cfg

@@ -28,6 +28,7 @@ __all__ = [
     "OPERATOR_GROUP",
     "PERFORMER",
     "SENSOR_GROUP",
+    "VIEWER",
     "WORLD",
     "Grant",
     "acl_config",
@@ -36,6 +37,7 @@ __all__ = [
 ]
 
 WORLD, MONITOR, LAUNCHER, OPERATOR = "world", "monitor", "launcher", "operator"
+VIEWER = "viewer"  # `cbdi view --live` and `--text`: reads everything, writes nothing
 PERFORMER = "performer"  # per agent: its performers and sensors (`cbdi.performer`, `cbdi.sensor`)
 OPERATOR_GROUP, SENSOR_GROUP = "operator", "sensors"  # the groups `cbdi ctl` and sensors ask under
 ROOT = keys.ROOT
@@ -143,8 +145,9 @@ def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
     """Return every identity of a run of `agents` (name, its components).
 
     The world alone writes world state, events and percepts; the monitor and the
-    launcher read everything; `operator` (`cbdi ctl`) asks any agent under group
-    `operator`, and reads who is alive, the world's public streams and desire events.
+    launcher read everything, and so does `viewer` (`cbdi view --live`), which writes
+    nothing; `operator` (`cbdi ctl`) asks any agent under group `operator`, and reads who
+    is alive, the world's public streams and desire events.
     """
     everything = (f"{ROOT}/**",)
     out = [
@@ -155,6 +158,7 @@ def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
             read=everything,
             query=(*_WORLD_ASKS, keys.world_rpc("stats")),
         ),
+        Grant(VIEWER, read=everything, query=_WORLD_ASKS),
         Grant(
             OPERATOR,
             read=(
