@@ -79,12 +79,12 @@ def launcher_world(up_argv: Sequence[str]) -> World:
     scenario's own (people's phase and jitter), reaches this world as it reaches the
     real one. Those are private helpers of `cbdi.launcher`; a test keeps this in step.
     """
-    from cbdi.launcher import cli, run
+    from cbdi.launcher import cli, specs
     from cbdi.runtime import load_config
     from cbdi_world.service import WorldSettings, build_world
 
     scenario = cli.scenario_from_args(cli._parser().parse_args(list(up_argv)))
-    spec = next(s for s in run._specs(scenario, "tcp/127.0.0.1:0") if s.service == "world")
+    spec = next(s for s in specs.run_specs(scenario, "tcp/127.0.0.1:0") if s.service == "world")
     argv = list(spec.argv)
     settings = load_config(
         WorldSettings, argv[argv.index("--map") :], prog="cbdi-world", section="world", env={}

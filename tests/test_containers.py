@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -186,3 +188,46 @@ def test_a_run_split_over_two_projects_with_joined_routers(
     finally:
         _compose(there, b, podman_socket, "down")
         _compose(here, a, podman_socket, "down")
+
+
+def test_a_killed_world_container_is_restarted_and_goes_on(
+    tmp_path: Path, image: str, podman_socket: str
+) -> None:
+    """kill -9 of the world's process mid-run: the restart policy starts its container
+    again, the world goes on from the state file in the container's own volume (not
+    from epoch 0), and the run ends done with everything recycled."""
+    path = _generate(image, tmp_path)
+    project = f"cbdi-test-k-{os.getpid()}"
+    argv = [COMPOSE or "docker-compose", "-f", str(path), "-p", project, "up",
+            "--exit-code-from", "wait"]  # fmt: skip
+    with (tmp_path / "up.log").open("w") as out:
+        up = subprocess.Popen(
+            argv, cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT,
+            env={**os.environ, "DOCKER_HOST": podman_socket},
+        )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 600
+        world, logs = "", ""
+        while time.monotonic() < deadline and up.poll() is None:
+            world = _compose(path, project, podman_socket, "ps", "-q", "world").stdout.strip()
+            if world:
+                shown = _run([PODMAN or "podman", "logs", world], tmp_path, 60)
+                logs = shown.stdout + shown.stderr
+                if re.search(r"event=act epoch=(1\d|[2-9]\d) ", logs):
+                    break
+            time.sleep(1)
+        else:
+            pytest.fail(f"no act at epoch 10+ in the world's log: {logs[-3000:]}")
+        pid = _run([PODMAN or "podman", "inspect", "-f", "{{.State.Pid}}", world], tmp_path, 60)
+        os.kill(int(pid.stdout.strip()), signal.SIGKILL)
+        up.wait(timeout=900)
+        shown = _run([PODMAN or "podman", "logs", world], tmp_path, 60)
+        logs = shown.stdout + shown.stderr
+    finally:
+        if up.poll() is None:
+            up.kill()
+        _compose(path, project, podman_socket, "down")
+    text = (tmp_path / "up.log").read_text()
+    assert up.returncode == 0, text[-4000:]
+    assert "event=recovered" in logs, logs[-4000:]
+    _check_recording(tmp_path / "runs" / "paper-7x7.mcap")

@@ -12,8 +12,8 @@ import pytest
 from cbdi.errors import ConfigError
 from cbdi.launcher import compose
 from cbdi.launcher.compose import ComposeOptions, compose_file
-from cbdi.launcher.run import _specs
 from cbdi.launcher.scenario import find_scenario, load_scenario
+from cbdi.launcher.specs import run_specs as _specs
 from cbdi.launcher.wait import exit_code
 
 REPO = Path(__file__).resolve().parents[2]
@@ -79,6 +79,16 @@ def test_every_service_logs_in_with_its_own_credentials_mounted_read_only() -> N
     assert "CBDI_ACL: /secrets/router/acl.json" in text
     assert text.count('"./secrets:/secrets:ro"') == text.count("    image: ")
     assert "CBDI_CREDENTIALS" not in compose_file(_scenario(), ComposeOptions(secrets=""))
+
+
+def test_the_world_keeps_its_state_in_its_containers_own_volume() -> None:
+    """Restarted by the restart policy (not by `cbdi up`, which says so), the world goes
+    on from the state file it finds in its own volume (tests/world/test_restart.py)."""
+    text = compose_file(_scenario(), ComposeOptions())
+    world = text[text.index("  world:") : text.index("  robot1-planner:")]
+    assert "CBDI_STATE: /state/world.state" in world and "CBDI_RESUME: if-found" in world
+    assert '"/state"]' in world and "restart: on-failure" in world
+    assert text.count("CBDI_STATE") == 1
 
 
 def test_unknown_parts_and_files_outside_domains_are_refused(

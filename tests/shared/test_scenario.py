@@ -10,8 +10,8 @@ from cbdi_recycling.chance import Chance
 
 from cbdi.errors import ConfigError
 from cbdi.launcher import cli
-from cbdi.launcher.run import _specs
 from cbdi.launcher.scenario import find_scenario, load_scenario
+from cbdi.launcher.specs import run_specs as _specs
 from cbdi.runtime import load_config
 from cbdi_world.service import WorldSettings, build_world
 

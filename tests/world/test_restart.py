@@ -36,9 +36,10 @@ def world_of(settings: WorldSettings, network: MemoryNetwork, restart: int) -> T
 
 
 async def run(
-    state: Path, stop_at: list[int], every: int = 20
+    state: Path, stop_at: list[int], every: int = 20, resume: str = "on-restart"
 ) -> tuple[RunFinished, list[tuple[int, int]]]:
-    """Run paper-7x7 to its end, the world stopped and restarted at each of `stop_at`;
+    """Run paper-7x7 to its end, the world stopped and restarted at each of `stop_at`
+    (told it restarted, or with `resume="if-found"` not: a container's restart policy);
     return the world's last word and each tick's (epoch, sequence number)."""
     members = tuple(f"robot1/{c}" for c in ("planner", "scheduler", "executor"))
     settings = WorldSettings(
@@ -53,6 +54,7 @@ async def run(
         option=("people_phase=true", "people_jitter=1"),
         state=str(state),
         state_every=every,
+        resume=resume,
     )
     network = MemoryNetwork()
     ended = messages(network.bus(), keys.world_stream("events"), RunFinished, LogSink())
@@ -68,7 +70,7 @@ async def run(
                     break
             world.stop()  # where it is: between two awaits, as a kill would find it
             await running
-            world = world_of(settings, network, restart)
+            world = world_of(settings, network, restart if resume == "on-restart" else 0)
             running = tg.create_task(world.run())
         _, finished = await anext(ended)
         agents.stop()
@@ -91,3 +93,18 @@ async def test_a_restarted_world_goes_on_with_the_same_run(tmp_path: Path, every
     # Three worlds (each one's ticks numbered from 1), every epoch published once.
     assert [epoch for epoch, _ in ticks] == list(range(plain.epoch + 1))
     assert [epoch for epoch, seq in ticks if seq == 1] == [0, 11, 24]
+
+
+async def test_a_world_restarted_untold_goes_on_from_the_state_file_it_finds(
+    tmp_path: Path,
+) -> None:
+    """`--resume if-found` (`cbdi compose`: the file in the container's own volume): the
+    restarted container's world is not told it restarted; it goes on from the file it
+    finds, and removes the file once the run ended (a container started again for a
+    new run must not go on with this one)."""
+    plain, _ = await run(tmp_path / "plain.state", [])
+    state = tmp_path / "world.state"
+    stopped, ticks = await run(state, [10, 23], 20, resume="if-found")
+    assert (stopped.trace_digest, stopped.epoch) == (plain.trace_digest, plain.epoch)
+    assert [epoch for epoch, seq in ticks if seq == 1] == [0, 11, 24]
+    assert not state.exists()

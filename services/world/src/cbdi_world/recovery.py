@@ -243,6 +243,15 @@ class Keeper:
         if self.file is not None:
             self.file.close()
 
+    def discard(self) -> None:
+        """Close and delete the file: the run it would go on with has ended."""
+        self.close()
+        self.file = None
+        try:
+            Path(self.path).unlink(missing_ok=True)
+        except OSError as exc:
+            self.log.warning("state_not_removed", state=self.path, reason=exc.strerror or str(exc))
+
     def _keep(self, write: Callable[[StateFile], None]) -> None:
         if self.file is None:
             return

@@ -53,7 +53,7 @@ from cbdi_world.recovery import (
     WorldState,
     simulator_state,
 )
-from cbdi_world.settings import WorldSettings, agent_entries, build_world
+from cbdi_world.settings import RESUME_IF_FOUND, WorldSettings, agent_entries, build_world
 from cbdi_world.trace import RequestTrace
 
 # The settings and `build_world` live in `cbdi_world.settings`; imported from here too.
@@ -195,7 +195,12 @@ class WorldService:
             await self.advance(self.world.step())
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
         if self.keeper is not None:
-            self.keeper.close()
+            if self.settings.resume == RESUME_IF_FOUND:
+                # Found again, the file would make the next run in this place (a
+                # container started again) go on with this one, ended.
+                self.keeper.discard()
+            else:
+                self.keeper.close()
         if self.settings.linger > 0:
             await WallClock().sleep(self.settings.linger)
             self.ctx.log.info("lingered", seconds=self.settings.linger)
@@ -352,7 +357,7 @@ def world_main(world: Simulator, clock: Clock | None = None) -> ServiceMain:
     async def body(ctx: ServiceContext) -> None:
         settings: WorldSettings = ctx.settings
         keeper = Keeper(settings.state, ctx.log) if settings.state else None
-        recovered = keeper.recover(world) if keeper and settings.restart > 0 else None
+        recovered = keeper.recover(world) if keeper and settings.resumes() else None
         simulator = recovered[0] if recovered else world
         ctx.log.info(
             "world",

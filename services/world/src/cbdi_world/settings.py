@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from cbdi import keys
 from cbdi.errors import CbdiError
@@ -19,7 +20,10 @@ from cbdi.simulator import (
 from cbdi_world.acks import members_of
 from cbdi_world.errors import WorldError
 
-__all__ = ["WorldSettings", "agent_entries", "build_world"]
+__all__ = ["RESUME_IF_FOUND", "RESUME_ON_RESTART", "WorldSettings", "agent_entries", "build_world"]
+
+RESUME_ON_RESTART, RESUME_IF_FOUND = "on-restart", "if-found"
+RESUMES = (RESUME_ON_RESTART, RESUME_IF_FOUND)
 
 
 @dataclass(frozen=True)
@@ -79,6 +83,21 @@ class WorldSettings(ServiceSettings):
             "from --state"
         },
     )
+    resume: str = field(
+        default=RESUME_ON_RESTART,
+        metadata={
+            "help": f"when the run goes on from --state: {RESUME_ON_RESTART} (--restart above"
+            f" 0) or {RESUME_IF_FOUND} (whenever the file is there: a container's own volume)"
+        },
+    )
+
+    def resumes(self) -> bool:
+        """Whether this world goes on from its state file (if it has a usable one)."""
+        if not self.state:
+            return False
+        if self.resume == RESUME_IF_FOUND:
+            return Path(self.state).exists()
+        return self.restart > 0
 
 
 def build_world(settings: WorldSettings) -> Simulator:
@@ -88,6 +107,8 @@ def build_world(settings: WorldSettings) -> Simulator:
         raise WorldError(f"--linger must be a finite number of seconds >= 0, not {settings.linger}")
     if settings.state_every < 1:
         raise WorldError(f"--state-every must be an epoch count >= 1, not {settings.state_every}")
+    if settings.resume not in RESUMES:
+        raise WorldError(f"--resume must be one of {', '.join(RESUMES)}, not {settings.resume!r}")
     simulator = load_simulator(settings.simulator, "--simulator")
     if not settings.map and getattr(simulator, "needs_map", True):
         raise WorldError(

@@ -37,6 +37,7 @@ __all__ = ["ComposeOptions", "compose_file", "main", "write_secrets"]
 DOMAINS_IN_IMAGE = "/opt/cbdi/domains"  # where the Dockerfile puts domains/
 RUNS_IN_CONTAINER = "/runs"
 SECRETS_IN_CONTAINER = "/secrets"
+WORLD_STATE = "/state/world.state"  # the world's state file (`cbdi-world --state`)
 WORLD_PART = "world"  # `--only world`: the world, the monitor and `wait`
 # Podman as root gives containers nofile=1048576; where the host's hard limit is lower
 # the container cannot start ("error setting rlimit"). A service needs far fewer.
@@ -126,6 +127,10 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
         service["command"] += [a for j in opts.join for a in ("--connect", j)]
     if plan.service == "world":
         service["command"] += ["--wait-agents", str(opts.wait_agents)]
+        # Its state in a volume of the container's own (kept over its restarts, new for
+        # a new container): restarted after a crash, it goes on where it was.
+        service["environment"] |= {"CBDI_STATE": WORLD_STATE, "CBDI_RESUME": "if-found"}
+        service["volumes"] = [*service.get("volumes", []), str(Path(WORLD_STATE).parent)]
     if opts.network == "host":
         service["network_mode"] = "host"
     elif plan.service == "router" and opts.publish:

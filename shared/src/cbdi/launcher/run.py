@@ -19,7 +19,6 @@ BDI agent's plans, replans, forecast-triggered repairs and search rounds, and th
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import shutil
 import signal
 import socket
@@ -29,21 +28,20 @@ import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from cbdi import keys, tally
-from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish, request
+from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish
 from cbdi.bus.base import Bus
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
-from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy, console_script
+from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
-from cbdi.launcher.services import ServicePlan, agent_of, plan_services
+from cbdi.launcher.services import plan_services
+from cbdi.launcher.specs import run_specs
+from cbdi.launcher.summary import RunSummary, collect_stats, count_actions, count_plans, settle
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
-from cbdi.runtime.host import SEPARATOR as HOST_SEPARATOR
 from cbdi.security import (
-    CREDENTIALS_ENV,
     RunSecrets,
     create_secrets,
     grants,
@@ -51,9 +49,8 @@ from cbdi.security import (
     run_dir,
 )
 from cbdi.security.policy import LAUNCHER
-from cbdi.wire.base import Message
 from cbdi.wire.common import RunFinished, RunLaunched
-from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
+from cbdi.wire.world import ActionRequest, Tick
 
 __all__ = ["LaunchOptions", "RunSummary", "launch"]
 
@@ -86,102 +83,11 @@ class LaunchOptions:
     run_dir: str = ""
 
 
-@dataclass
-class RunSummary:
-    """What `cbdi up --json` prints."""
-
-    scenario: str
-    result: str = "not_started"
-    reason: str = ""
-    epochs: int = 0
-    sim_time: float = 0.0
-    wall_time: float = 0.0
-    stats: dict[str, Any] = field(default_factory=dict)
-    restarts: dict[str, int] = field(default_factory=dict)
-    freezes: dict[str, int] = field(default_factory=dict)  # processes killed as frozen
-    exit_codes: dict[str, list[int]] = field(default_factory=dict)
-    planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
-    # Per agent: `actions` it asked the world for and the simulated time of the first.
-    actions: dict[str, dict[str, Any]] = field(default_factory=dict)
-    # The world's request trace (cbdi_world.trace): its length and digest. Equal
-    # digests, equal runs.
-    requests: int = 0
-    trace_digest: str = ""
-    # Lockstep members that missed an ack timeout (member -> epochs stalled).
-    stalls: dict[str, int] = field(default_factory=dict)
-
-    @property
-    def ok(self) -> bool:
-        return self.result in ("done", "time_limit")
-
-
 def free_port() -> int:
     """Return a TCP port on loopback that was free a moment ago."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
-
-
-# After the run ended the world still answers (the launcher asks for its statistics)
-# this long at most, should the launcher not stop it (wall seconds). In the environment,
-# not the arguments: those are the ones `cbdi compose` gives, whose world stays.
-WORLD_LINGER = 30.0
-
-
-def _specs(
-    scenario: Scenario,
-    endpoint: str,
-    record: str = "",
-    heartbeat: float = 0.5,
-    agent_process: bool = False,
-    state: str = "",
-    secrets: RunSecrets | None = None,
-) -> list[ProcessSpec]:
-    """Return the run's processes: one per service, or with `agent_process` one per BDI
-    agent (`robot1/agent`, running its components with `cbdi agent`). The world saves
-    its state to the file `state` (none if ''). With `secrets`, each service logs in
-    with its own credentials and the router checks them."""
-    beat = {"CBDI_HEARTBEAT": str(heartbeat)}
-    # A fixed hash seed: no decision may hang on the order of a set of strings.
-    env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **beat}
-    world = {**env, "CBDI_LINGER": str(WORLD_LINGER), **({"CBDI_STATE": state} if state else {})}
-    router = dict(beat)
-    if secrets is not None:
-        router |= {"CBDI_USERS": str(secrets.users), "CBDI_ACL": str(secrets.acl)}
-    own = {"router": router, "world": world}
-    bdi = {a.name for a in scenario.agents if a.kind == "bdi"} if agent_process else set()
-    units: dict[str, list[ServicePlan]] = {}  # process id -> the services it runs, in order
-    for p in plan_services(scenario, endpoint, record):
-        agent = agent_of(p.service)
-        process = keys.service_id("agent", agent) if agent in bdi else p.service
-        units.setdefault(process, []).append(p)
-    specs = []
-    for service, plans in units.items():
-        if len(plans) == 1 and plans[0].service == service:
-            program = console_script(plans[0].script, plans[0].module)
-            penv = own.get(service, env)
-            if secrets is not None and service != "router":
-                penv = {**penv, CREDENTIALS_ENV: str(secrets.credentials(service))}
-            specs.append(ProcessSpec.of(service, program, plans[0].args, penv))
-        else:
-            specs.append(_host_spec(service, plans, env, secrets))
-    return specs
-
-
-def _host_spec(
-    service: str, plans: list[ServicePlan], env: dict[str, str], secrets: RunSecrets | None
-) -> ProcessSpec:
-    """Return the process running `plans` with `cbdi agent` (sections split by `--`),
-    each section with its own credentials."""
-    args: list[str] = ["agent"]
-    for plan in plans:
-        if len(args) > 1:
-            args.append(HOST_SEPARATOR)
-        args += [plan.service.rsplit("/", 1)[-1], *plan.args]
-        if secrets is not None:
-            args += ["--credentials", str(secrets.credentials(plan.service))]
-    program = console_script("cbdi", "cbdi.cli")
-    return ProcessSpec.of(service, program, args, env, [p.service for p in plans])
 
 
 class _Liveliness:
@@ -234,7 +140,7 @@ async def _launch(
     state_dir = tempfile.mkdtemp(prefix="cbdi-run-")  # private (0700): the world's state
     try:
         state = f"{state_dir}/world.state"
-        specs = _specs(
+        specs = run_specs(
             scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process, state, secrets
         )
     except BaseException:
@@ -268,7 +174,7 @@ async def _launch(
         for proc in procs:  # from now on an exit (the world's linger ends) is no failure
             proc.stopping = True
         if bus is not None:
-            await _collect_stats(bus, summary)
+            await collect_stats(bus, summary)
         for proc in reversed(procs):
             await proc.stop()
         if bus is not None:
@@ -324,10 +230,10 @@ async def _start_all(
     events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
     tg.create_task(_forward(events, ends))
     # Subscribed before any agent starts, so the tally misses none of their messages.
-    tg.create_task(_count(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
+    tg.create_task(count_plans(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
     act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
     tg.create_task(
-        _actions(inputs(bus, [keys.CLOCK, act], (Tick, ActionRequest), LogSink()), summary)
+        count_actions(inputs(bus, [keys.CLOCK, act], (Tick, ActionRequest), LogSink()), summary)
     )
     if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
         from cbdi.view import text_view
@@ -381,25 +287,6 @@ async def _router_is_ours(router: ManagedProcess, endpoint: str, opts: LaunchOpt
             tail = " | ".join(router.tail) or "no output"
             raise CbdiError(f"our router could not listen on {endpoint} (port taken?): {tail}")
         await clock.sleep(0.05)
-
-
-async def _count(stream: AsyncIterator[tuple[str, Message]], planners: tally.PlannerTally) -> None:
-    """Count the planners' plans, replans, repairs and rounds as they are published."""
-    async for key, msg in stream:
-        planners.observe(key, msg)
-
-
-async def _actions(stream: AsyncIterator[tuple[str, Message]], summary: RunSummary) -> None:
-    """Count each agent's action requests and note the simulated time of its first."""
-    now = 0.0
-    async for _, msg in stream:
-        if isinstance(msg, Tick):
-            now = msg.time
-        elif isinstance(msg, ActionRequest):
-            agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
-            agent["actions"] += 1
-            if agent["first_action"] is None:
-                agent["first_action"] = now
 
 
 async def _wait_alive(live: _Liveliness, group: list[ManagedProcess], opts: LaunchOptions) -> None:
@@ -469,35 +356,4 @@ async def _await_end(
             loop.remove_signal_handler(sig)
         for w in watchers:
             w.cancel()
-    _settle(summary, reason, scenario)
-
-
-def _settle(summary: RunSummary, reason: str, scenario: Scenario) -> None:
-    if reason == "done":
-        summary.result = "done"
-    elif reason == "time_limit":
-        until_done = scenario.run.until == "done"
-        summary.result = "incomplete" if until_done else "time_limit"
-        summary.reason = "time limit reached before the world was done" if until_done else ""
-    else:
-        summary.result = "failed" if reason.startswith("failed") else reason
-        summary.reason = reason
-
-
-async def _collect_stats(bus: Bus, summary: RunSummary) -> None:
-    with contextlib.suppress(CbdiError, TimeoutError):
-        stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats, timeout=2.0)
-        summary.stats = {
-            "epoch": stats.epoch,
-            "time": stats.time,
-            **stats.totals,  # the simulator's own totals, by name
-            "agents": {a.agent: _agent_dict(a) for a in stats.agents},
-        }
-        summary.epochs = summary.epochs or stats.epoch
-        summary.sim_time = summary.sim_time or stats.time
-
-
-def _agent_dict(a: Any) -> dict[str, int | float]:
-    """One agent's counters: the generic ones, the simulator's own (`counts`), busy time."""
-    generic = ("moves", "blocked", "failed", "rejected", "contacts")
-    return {**{k: getattr(a, k) for k in generic}, **a.counts, "busy": a.busy}
+    settle(summary, reason, scenario)

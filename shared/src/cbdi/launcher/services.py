@@ -1,6 +1,6 @@
 """Which services a scenario runs, with which arguments: one list for every way of running.
 
-`cbdi up` turns it into supervised processes (`run._specs`), `cbdi compose` into compose
+`cbdi up` turns it into supervised processes (`specs.run_specs`), `cbdi compose` into compose
 services. So both start the same world, with the same `--member` for every component of
 every agent (the start barrier), and the same agent services.
 """
