@@ -165,12 +165,12 @@ def test_a_run_split_over_two_projects_with_joined_routers(
     tmp_path: Path, image: str, podman_socket: str
 ) -> None:
     first, second = _free_port(), _free_port()
-    # Joined routers do not log in to each other (docs/security.md): no security here.
+    # Secured: the two projects share the run's secrets (written by the first); the
+    # joining router logs in to the hub, and knows the hub by its id (docs/security.md).
     here = _generate(image, tmp_path, "--network", "host", "--port", str(first),
-                     "--only", "world,robot1", "--no-secure")  # fmt: skip
+                     "--only", "world,robot1")  # fmt: skip
     there = _generate(image, tmp_path, "--network", "host", "--port", str(second),
-                      "--join", f"tcp/127.0.0.1:{first}", "--only", "robot2",
-                      "--no-secure")  # fmt: skip
+                      "--join", f"tcp/127.0.0.1:{first}", "--only", "robot2")  # fmt: skip
     a, b = f"cbdi-test-a-{os.getpid()}", f"cbdi-test-b-{os.getpid()}"
     try:
         started = _compose(there, b, podman_socket, "up", "-d")

@@ -179,3 +179,93 @@ def test_a_rogue_client_is_refused_and_the_run_goes_on(tmp_path: Path) -> None:
     assert "acl_denied" not in before, before[-3000:]
     others = [line for line in log.splitlines() if "acl_denied" in line and "robot2." not in line]
     assert not others, others[:5]
+
+
+async def _receive(bus: ZenohBus, expr: str, want: str, send: object, seconds: float) -> bool:
+    """Subscribe to `expr` on `bus`, then call `send()` every 0.2 s until a sample on
+    `want` arrives or `seconds` pass; return whether it arrived."""
+    sub = bus.subscribe(expr)
+
+    async def first() -> None:
+        async for sample in sub:
+            if sample.key == want:
+                return
+
+    waiting = asyncio.ensure_future(first())
+    try:
+        async with asyncio.timeout(seconds):
+            while not waiting.done():
+                await send()  # type: ignore[operator]
+                await asyncio.sleep(0.2)
+        return True
+    except TimeoutError:
+        return False
+    finally:
+        waiting.cancel()
+
+
+def test_joined_routers_carry_a_secured_run_and_refuse_a_rogue(tmp_path: Path) -> None:
+    """A run split over two hosts (`cbdi compose --join`), on loopback: the joining router
+    logs in to the hub as `router`, and knows the hub by its Zenoh id (the run's
+    secrets). What robot2's services send on the joining router reaches the hub's side
+    and back; robot2's credentials still cannot write robot1's keys there."""
+    from cbdi.security import create_secrets, grants
+    from cbdi.security.policy import COMPOSE_GRANTS
+
+    agents = [(a, ("planner", "scheduler", "executor")) for a in ("robot1", "robot2")]
+    secrets = create_secrets(tmp_path / "secrets", [*grants(agents), *COMPOSE_GRANTS])
+    hub, joiner = free_port(), free_port()
+    rules = ["--users", str(secrets.users), "--acl", str(secrets.acl)]
+    router = [str(BIN / "cbdi"), "router", "--heartbeat", "0"]
+    a = Proc([*router, "--listen", f"tcp/127.0.0.1:{hub}", "--zenoh-config",
+              str(secrets.hub), *rules], tmp_path / "hub.log")  # fmt: skip
+    b = Proc([*router, "--listen", f"tcp/127.0.0.1:{joiner}", "--connect",
+              f"tcp/127.0.0.1:{hub}", "--credentials", str(secrets.credentials("router")),
+              *rules], tmp_path / "joiner.log")  # fmt: skip
+    creds = secrets.root / "credentials"
+    forged = keys.agent_stream("robot1", "executor", "status")
+
+    async def check() -> dict[str, bool]:
+        at_hub, at_joiner = f"tcp/127.0.0.1:{hub}", f"tcp/127.0.0.1:{joiner}"
+        monitor = await _as(at_hub, creds / "monitor.json")
+        scheduler = await _as(at_hub, creds / "robot2.scheduler.json")
+        planner = await _as(at_joiner, creds / "robot2.planner.json")
+        rogue = await _as(at_joiner, creds / "robot2.executor.json")
+        status = keys.agent_stream("robot2", "planner", "status")
+        plans = keys.scheduler_plans("robot2")
+        try:
+            out = {
+                "joiner_to_hub": await _receive(
+                    monitor, f"{keys.ROOT}/**", status, lambda: planner.publish(status, b"\x90"), 20
+                ),
+                "hub_to_joiner": await _receive(
+                    planner,
+                    f"{keys.ROOT}/robot2/**",
+                    plans,
+                    lambda: scheduler.publish(plans, b"\x90"),
+                    20,
+                ),
+                "forged_arrives": await _receive(
+                    monitor, f"{keys.ROOT}/**", forged, lambda: rogue.publish(forged, b"\x90"), 3
+                ),
+            }
+        finally:
+            for bus in (monitor, scheduler, planner, rogue):
+                await bus.close()
+        return out
+
+    try:
+        wait_for(lambda: "event=routing" in a.output() + "" and "event=routing" in b.output(),
+                 timeout=30, what="both routers")  # fmt: skip
+        out = asyncio.run(check())
+    finally:
+        a.stop()
+        b.stop()
+    joined = b.log_path.read_text()
+    logs = a.log_path.read_text() + joined
+    assert out == {"joiner_to_hub": True, "hub_to_joiner": True, "forged_arrives": False}, (
+        out,
+        logs[-4000:],
+    )
+    assert "acl_no_subject" not in logs, logs[-4000:]
+    assert _denied(joined, "robot2.executor", "put", forged), joined[-4000:]

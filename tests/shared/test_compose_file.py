@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -58,10 +57,13 @@ def test_a_run_splits_over_two_projects_with_joined_routers() -> None:
     scenario = _scenario()
     here = ComposeOptions(network="host", port=17447, only=("world", "robot1"))
     there = ComposeOptions(
-        network="host", port=17448, only=("robot2",), join=("tcp/127.0.0.1:17447",), secrets=""
+        network="host", port=17448, only=("robot2",), join=("tcp/127.0.0.1:17447",)
     )
-    with pytest.raises(ConfigError, match="joined routers do not log in"):
-        compose_file(scenario, replace(there, secrets="./secrets"))
+    # The hub's router has the hub's id; the joining one logs in to it as `router`.
+    hub, joiner = compose_file(scenario, here), compose_file(scenario, there)
+    assert "CBDI_ZENOH_CONFIG: /secrets/router/hub.json" in hub
+    assert "CBDI_ZENOH_CONFIG" not in joiner
+    assert "CBDI_CREDENTIALS: /secrets/credentials/router.json" in joiner
     first = _commands(compose_file(scenario, here))
     second = _commands(compose_file(scenario, there))
     assert set(first) == {"router", "monitor", "world", "wait"} | {

@@ -10,7 +10,8 @@ every agent's services, and `wait` (`cbdi wait`), which exits with the run's res
 
 A run can be split over several compose projects (hosts), each with its own router, the
 routers joined: `--only` picks the agents (and `world`) a project runs, `--join` the
-router to connect to (docs/containers.md).
+router to connect to, the run's hub (docs/containers.md). The projects share the run's
+secrets (`--secrets`).
 """
 
 from __future__ import annotations
@@ -66,15 +67,6 @@ class ComposeOptions:
 
 def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") -> str:
     """Return the compose file (YAML) running `scenario` with `opts`."""
-    if opts.secrets and opts.join:
-        raise ConfigError(
-            "--join",
-            ",".join(opts.join),
-            "joined routers do not log in to each other (their link matches no access-"
-            "control subject), so a secured router refuses the other's traffic: connect "
-            "every service to one router, over TLS across hosts (docs/security.md), or "
-            "add --no-secure",
-        )
     host = opts.network == "host"
     listen = opts.listen or f"tcp/{'127.0.0.1' if host else '0.0.0.0'}:{opts.port}"
     connect = f"tcp/{'127.0.0.1' if host else 'router'}:{opts.port}"
@@ -120,7 +112,7 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
         # Containers start together: wait for the router, do not fail for its absence.
         env |= {"CBDI_CONNECT": connect, "CBDI_CONNECT_TIMEOUT": "120"}
     if opts.secrets:
-        env |= _secured(plan.service)
+        env |= _secured(plan.service, hub=not opts.join)
         service["volumes"] = [f"{opts.secrets}:{SECRETS_IN_CONTAINER}:ro"]
     service["environment"] = env
     if plan.service == "router" and opts.join:
@@ -148,13 +140,17 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
     return service
 
 
-def _secured(service: str) -> dict[str, str]:
+def _secured(service: str, hub: bool) -> dict[str, str]:
     """The environment naming a service's secrets in its container: its credentials (the
-    router's: to join other routers), and the router's user list and rules."""
+    router's: to join another router), and the router's user list and rules; a router
+    that joins none is the run's hub, with the hub's Zenoh id, by which the routers
+    that join it know it (`cbdi.security.policy.acl_config`)."""
     inside = RunSecrets(Path(SECRETS_IN_CONTAINER))
     env = {CREDENTIALS_ENV: str(inside.credentials(service))}
     if service == "router":
         env |= {"CBDI_USERS": str(inside.users), "CBDI_ACL": str(inside.acl)}
+        if hub:
+            env["CBDI_ZENOH_CONFIG"] = str(inside.hub)
     return env
 
 
@@ -164,7 +160,8 @@ def write_secrets(scenario: Scenario, where: Path) -> bool:
     agents = [(a.name, AGENT_KINDS[a.kind]) for a in scenario.agents]
     everyone = [*grants(agents), *COMPOSE_GRANTS]
     existing = RunSecrets(where)
-    if existing.acl.is_file() and all(existing.credentials(g.identity).is_file() for g in everyone):
+    have = existing.acl.is_file() and existing.hub.is_file()
+    if have and all(existing.credentials(g.identity).is_file() for g in everyone):
         return False
     create_secrets(where, everyone)
     return True

@@ -39,6 +39,7 @@ __all__ = [
 WORLD, MONITOR, LAUNCHER, OPERATOR = "world", "monitor", "launcher", "operator"
 VIEWER = "viewer"  # `cbdi view --live` and `--text`: reads everything, writes nothing
 PERFORMER = "performer"  # per agent: its performers and sensors (`cbdi.performer`, `cbdi.sensor`)
+HUB_GRANT, HUB_SUBJECT = "router", "hub"  # the grant a joined hub router has, at the joiner
 OPERATOR_GROUP, SENSOR_GROUP = "operator", "sensors"  # the groups `cbdi ctl` and sensors ask under
 ROOT = keys.ROOT
 
@@ -221,9 +222,15 @@ def _rules(g: Grant) -> list[tuple[str, tuple[str, ...], str, list[str]]]:
     ]
 
 
-def acl_config(all_grants: Sequence[Grant]) -> dict[str, Any]:
+def acl_config(all_grants: Sequence[Grant], hub: str = "") -> dict[str, Any]:
     """Return the router's `access_control` configuration: deny by default, allow what
     each identity's grant says, to that identity's user name only.
+
+    `hub`: the Zenoh id of the run's hub router, which other routers join (`cbdi
+    compose --join`). Zenoh's user-password login proves the router that opens a link to
+    the one that accepts it only, so the joining router knows the hub by its id: the hub
+    gets the `router` grant. The id is a random one of the run's secrets, and the joiner
+    lets in only sessions that logged in, so posing as the hub takes the run's secrets.
 
     Every authenticated identity is also told of declarations under `cbdi/**` (who
     subscribes, serves, is alive), so that publishers and queriers find their peers;
@@ -250,7 +257,12 @@ def acl_config(all_grants: Sequence[Grant]) -> dict[str, Any]:
                 rules.append(_rule(rule_id, messages, flow, exprs))
                 ids.append(rule_id)
         subjects.append({"id": g.user, "usernames": [g.user]})
-        policies.append({"id": g.user, "rules": ids, "subjects": [g.user]})
+        named = [g.user]
+        if hub and g.identity == HUB_GRANT:
+            subjects.append({"id": HUB_SUBJECT, "zids": [hub]})
+            named.append(HUB_SUBJECT)
+            policies[0]["subjects"].append(HUB_SUBJECT)  # told of declarations too
+        policies.append({"id": g.user, "rules": ids, "subjects": named})
     # One subject per identity, the policy "all" naming them all.
     return {
         "enabled": True,

@@ -75,6 +75,11 @@ class RunSecrets:
     def acl(self) -> Path:
         return self.root / "router" / "acl.json"
 
+    @property
+    def hub(self) -> Path:
+        """The hub router's Zenoh settings: its id (`{"id": ...}`, `--zenoh-config`)."""
+        return self.root / "router" / "hub.json"
+
     def remove(self) -> None:
         """Delete the secrets (they are worth nothing once the router is gone)."""
         shutil.rmtree(self.root / "credentials", ignore_errors=True)
@@ -105,8 +110,19 @@ def create_secrets(root: Path, all_grants: Sequence[Grant]) -> RunSecrets:
         _write_private(out.credentials(g.identity), json.dumps({**record, "groups": g.groups}))
         lines.append(f"{g.user}:{password}")
     _write_private(out.users, "\n".join(lines) + "\n")
-    _write_private(out.acl, json.dumps(acl_config(all_grants), indent=1))
+    hub = _zenoh_id()
+    _write_private(out.hub, json.dumps({"id": hub}))
+    _write_private(out.acl, json.dumps(acl_config(all_grants, hub), indent=1))
     return out
+
+
+def _zenoh_id() -> str:
+    """A random Zenoh id (16 bytes in hex; no zero at either end, which Zenoh would not
+    print back the same)."""
+    while True:
+        zid = secrets.token_hex(16)
+        if zid[0] != "0" and zid[-1] != "0":
+            return zid
 
 
 def read_credentials(path: str | Path) -> Credentials:
