@@ -35,9 +35,9 @@ def beliefs(robot: str = "c_1_0", blocked: tuple[str, ...] = ()) -> BeliefSet:
     return BeliefSet(instances=instances, facts=frozenset(facts), fluents=fluents)
 
 
-def planner(**kw: object) -> ContinualPlanner:
+def planner(life: int = 0, **kw: object) -> ContinualPlanner:
     settings = PlanningSettings(round_interval=0, expansions_per_round=3, plan_size_limit=2, **kw)  # type: ignore[arg-type]
-    core = ContinualPlanner("robot1", DOMAIN, settings, improve=False)
+    core = ContinualPlanner("robot1", DOMAIN, settings, improve=False, life=life)
     core.on_beliefs(beliefs(), 0.0)
     return core
 
@@ -232,6 +232,20 @@ def test_a_status_for_a_plan_never_published_is_refused() -> None:
     assert core.line is not None
     core.on_status(status(core.line.plan_id, core.line.step_ids[0], "running"))
     assert core.line.statuses == {0: "running"}
+
+
+def test_a_restarted_planner_numbers_its_plans_apart_and_lets_its_predecessors_go() -> None:
+    """After a restart (`life` 1) the plan ids are `robot1-plan-r1-N`, never a reused
+    `robot1-plan-1`; the executor's statuses of the predecessor's plans are no error."""
+    core = planner(life=1)
+    core.on_request(request())
+    drain(core)
+    assert core.line is not None and core.line.plan_id == "robot1-plan-r1-1"
+    core.on_status(status("robot1-plan-3", "robot1-plan-3-9", "succeeded"))  # the predecessor's
+    with pytest.raises(UnknownPlanError):  # this life's own number, never published
+        core.on_status(status("robot1-plan-r1-7", "robot1-plan-r1-7-1", "running"))
+    with pytest.raises(UnknownPlanError):  # a first life knows no predecessor
+        planner().on_status(status("robot1-plan-3", "robot1-plan-3-9", "succeeded"))
 
 
 def status(plan_id: str, step_id: str, what: str) -> ActionStatus:

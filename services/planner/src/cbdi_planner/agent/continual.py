@@ -99,6 +99,12 @@ class Search:
     blocked: bool | None = None  # a failed search: blocked by something that moves?
 
 
+def plan_prefix(agent: str, life: int) -> str:
+    """How the plan ids of `agent`'s planner begin: `robot1-plan-` (then 1, 2, ...), and
+    after its first restart `robot1-plan-r1-`, and so on."""
+    return f"{agent}-plan-" if life == 0 else f"{agent}-plan-r{life}-"
+
+
 class ContinualPlanner:
     """The continual planner of one agent."""
 
@@ -111,8 +117,12 @@ class ContinualPlanner:
         log: Log | None = None,
         improve: bool = True,
         transients: Transients | None = None,
+        life: int = 0,
     ) -> None:
         self.agent, self.domain, self.settings, self.grid = agent, domain, settings, grid
+        # A restarted planner (`life` restarts so far) numbers its plans apart from its
+        # predecessors', whose plans the executor may still report on.
+        self.plan_prefix = plan_prefix(agent, life)
         self.transients = transients or Transients()
         self.groundings = Groundings(domain, self.transients)
         self.log: Log = log or (lambda *a, **k: None)
@@ -278,6 +288,12 @@ class ContinualPlanner:
         replaced plans are expected and ignored).
         """
         if status.plan_id not in self.published:
+            if (
+                self.plan_prefix != plan_prefix(self.agent, 0)
+                and status.plan_id.startswith(plan_prefix(self.agent, 0))
+                and not status.plan_id.startswith(self.plan_prefix)
+            ):
+                return  # a predecessor's plan, still being reported on: not ours to track
             raise UnknownPlanError(status.plan_id, status.step_id)
         for line in (self.line, self.search.repairs if self.search else None):
             if (
@@ -578,4 +594,4 @@ class ContinualPlanner:
         return SearchStatus(agent=self.agent, request_id=request_id, status=status, reason=reason)
 
     def _plan_id(self) -> str:
-        return f"{self.agent}-plan-{next(self.ids)}"
+        return f"{self.plan_prefix}{next(self.ids)}"

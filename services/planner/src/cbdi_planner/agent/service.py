@@ -36,7 +36,7 @@ from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi.wire.world import EpochAck, Tick
 from cbdi_planner.agent.backends import COUNTING_BACKENDS, Counted, plan_counted, plan_with
-from cbdi_planner.agent.continual import ContinualPlanner, Search
+from cbdi_planner.agent.continual import ContinualPlanner, Search, plan_prefix
 from cbdi_planner.agent.errors import BadRequestError, UnknownAgentError
 from cbdi_planner.agent.pacing import Pacer
 from cbdi_planner.agent.problem import (
@@ -69,6 +69,13 @@ class PlannerSettings(ServiceSettings):
     """Settings of `cbdi-planner serve`."""
 
     agent: str = field(default="robot1", metadata={"help": "the agent this planner serves"})
+    restart: int = field(
+        default=0,
+        metadata={
+            "help": "restarts so far (cbdi up sets CBDI_RESTART): above 0 its plans are "
+            "numbered apart from its predecessor's (robot1-plan-r1-1)"
+        },
+    )
     agent_file: str = field(default="", metadata={"help": "the agent file (TOML)"})
     backend: str = field(default="", metadata={"help": "cbdi or kairos (default: agent file)"})
     time_grid: float = field(default=1.0, metadata={"help": "snap step starts to this grid"})
@@ -192,8 +199,10 @@ class PlannerService(_Epochs):
         grid: float,
         planning_speed: float = 0.0,
         ack_timeout: float = 120.0,
+        life: int = 0,
     ) -> None:
         self.ctx, self.agent, self.domain, self.raw = ctx, agent, domain, raw
+        self.plan_prefix = plan_prefix(agent, life)  # apart from a predecessor's plans
         self.backend, self.grid = backend, grid
         self.planning_speed = planning_speed or raw.planning.planning_speed
         self.ack_timeout = ack_timeout
@@ -348,7 +357,7 @@ class PlannerService(_Epochs):
 
     async def publish_plan(self, req: SearchRequest, plan: Plan) -> None:
         start = math.floor(self.now / self.grid + 1e-9) * self.grid + self.grid
-        plan_id = f"{self.agent}-plan-{next(self.plan_ids)}"
+        plan_id = f"{self.plan_prefix}{next(self.plan_ids)}"
         steps = [
             replace(s, start=round(s.start / self.grid) * self.grid)
             for s in plan_steps(self.domain, plan, start, plan_id)
@@ -543,6 +552,7 @@ def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -
                 log=ctx.log.info,
                 improve=settings.improve,
                 transients=Transients(raw.transient),
+                life=settings.restart,
             )
             online = OnlinePlannerService(ctx, core, settings.planning_speed, settings.ack_timeout)
             stream = sequenced_inputs(ctx.bus, online.input_keys(), ONLINE_INPUTS, ctx)
@@ -559,6 +569,7 @@ def planner_main(settings: PlannerSettings, domain: Domain, raw: RawAgentFile) -
                 settings.time_grid,
                 settings.planning_speed,
                 settings.ack_timeout,
+                life=settings.restart,
             )
             stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
             ctx.start(service.inputs(stream), name="planner")
