@@ -30,6 +30,7 @@ from cbdi.errors import ConfigError
 from cbdi.launcher.cli import scenario_arguments, scenario_from_args
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
+from cbdi.runtime.life import LIFE_ENV
 from cbdi.security import CREDENTIALS_ENV, RunSecrets, create_secrets, grants
 from cbdi.security.policy import COMPOSE_GRANTS
 
@@ -39,6 +40,7 @@ DOMAINS_IN_IMAGE = "/opt/cbdi/domains"  # where the Dockerfile puts domains/
 RUNS_IN_CONTAINER = "/runs"
 SECRETS_IN_CONTAINER = "/secrets"
 WORLD_STATE = "/state/world.state"  # the world's state file (`cbdi-world --state`)
+LIFE_FILE = "/state/life"  # a service's starts (`cbdi.runtime.life`)
 WORLD_PART = "world"  # `--only world`: the world, the monitor and `wait`
 # Podman as root gives containers nofile=1048576; where the host's hard limit is lower
 # the container cannot start ("error setting rlimit"). A service needs far fewer.
@@ -117,12 +119,17 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
     service["environment"] = env
     if plan.service == "router" and opts.join:
         service["command"] += [a for j in opts.join for a in ("--connect", j)]
+    if plan.service not in ("router", "wait"):
+        # A volume of the container's own (kept over its restarts, new for a new
+        # container): the service counts its starts there, so that one restarted by the
+        # policy knows it was (`cbdi.runtime.life`: the monitor goes on in a new part,
+        # the planner numbers its plans apart), and the world keeps its state there.
+        service["environment"][LIFE_ENV] = LIFE_FILE
+        service["volumes"] = [*service.get("volumes", []), str(Path(LIFE_FILE).parent)]
     if plan.service == "world":
         service["command"] += ["--wait-agents", str(opts.wait_agents)]
-        # Its state in a volume of the container's own (kept over its restarts, new for
-        # a new container): restarted after a crash, it goes on where it was.
+        # Restarted after a crash, it goes on where it was; the file goes at the end.
         service["environment"] |= {"CBDI_STATE": WORLD_STATE, "CBDI_RESUME": "if-found"}
-        service["volumes"] = [*service.get("volumes", []), str(Path(WORLD_STATE).parent)]
     if opts.network == "host":
         service["network_mode"] = "host"
     elif plan.service == "router" and opts.publish:

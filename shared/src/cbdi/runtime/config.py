@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 import msgspec
 
 from cbdi.errors import ConfigError
+from cbdi.runtime.life import count_start
 
 __all__ = ["load_config"]
 
@@ -122,6 +123,8 @@ def load_config(
 
     Fields named in `positional` are taken as positional arguments instead of flags.
     """
+    if env is None:
+        count_start()  # a container restarted by its policy learns its restart count
     parser = _parser(cls, prog, description, positional)
     args = parser.parse_args(list(argv) if argv is not None else None)
     sources: dict[str, str] = {}

@@ -29,6 +29,7 @@ from cbdi.bus.base import Bus
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig, open_bus
 from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
+from cbdi.runtime.life import end_cleanly
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent
 from cbdi.security.secrets import read_credentials, read_zenoh_settings
@@ -186,7 +187,10 @@ def run_services(services: Sequence[Hosted]) -> int:
     if guard.orphaned:  # the supervisor died before the guard was set: no signal will come
         logs[0].warning("orphaned", parent=guard.parent)
         return 1
-    return uvloop.run(_run(services, logs, guard))
+    code = uvloop.run(_run(services, logs, guard))
+    if code == 0:
+        end_cleanly()
+    return code
 
 
 async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGuard) -> int:
