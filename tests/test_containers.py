@@ -190,19 +190,12 @@ def test_a_run_split_over_two_projects_with_joined_routers(
         _compose(here, a, podman_socket, "down")
 
 
-def _kill(container: str, where: Path) -> None:
-    """SIGKILL a container's main process from the host (a crash, not a stop)."""
-    pid = _run([PODMAN or "podman", "inspect", "-f", "{{.State.Pid}}", container], where, 60)
-    os.kill(int(pid.stdout.strip()), signal.SIGKILL)
-
-
 def test_a_killed_world_container_is_restarted_and_goes_on(
     tmp_path: Path, image: str, podman_socket: str
 ) -> None:
-    """kill -9 of the world's process mid-run, then of robot1's planner: the restart
-    policy starts their containers again; the world goes on from the state file in its
-    container's own volume (not from epoch 0), the planner knows it restarted (its
-    volume counts its starts) and reuses no plan id, and the run ends done."""
+    """kill -9 of the world's process mid-run: the restart policy starts its container
+    again, the world goes on from the state file in the container's own volume (not
+    from epoch 0), and the run ends done with everything recycled."""
     path = _generate(image, tmp_path)
     project = f"cbdi-test-k-{os.getpid()}"
     argv = [COMPOSE or "docker-compose", "-f", str(path), "-p", project, "up",
@@ -225,16 +218,11 @@ def test_a_killed_world_container_is_restarted_and_goes_on(
             time.sleep(1)
         else:
             pytest.fail(f"no act at epoch 10+ in the world's log: {logs[-3000:]}")
-        _kill(world, tmp_path)
-        # And robot1's planner: restarted by the policy too, it learns it was (its
-        # container's own volume counts its starts) and numbers its plans apart.
-        planner = _compose(path, project, podman_socket, "ps", "-q", "robot1-planner")
-        _kill(planner.stdout.strip(), tmp_path)
+        pid = _run([PODMAN or "podman", "inspect", "-f", "{{.State.Pid}}", world], tmp_path, 60)
+        os.kill(int(pid.stdout.strip()), signal.SIGKILL)
         up.wait(timeout=900)
         shown = _run([PODMAN or "podman", "logs", world], tmp_path, 60)
         logs = shown.stdout + shown.stderr
-        shown = _run([PODMAN or "podman", "logs", planner.stdout.strip()], tmp_path, 60)
-        planned = shown.stdout + shown.stderr
     finally:
         if up.poll() is None:
             up.kill()
@@ -244,8 +232,4 @@ def test_a_killed_world_container_is_restarted_and_goes_on(
     recovered = re.search(r"event=recovered state=\S+ epoch=(\d+)", logs)
     assert recovered and int(recovered.group(1)) >= 10, logs[-4000:]  # not from epoch 0
     print("the world's container went on from epoch", recovered.group(1))
-    assert planned.count("event=ready") == 2, planned[-3000:]  # two lives
-    first_plans = re.findall(r"event=plan plan=(\S+) baseline=\"\"", planned)
-    assert len(first_plans) == len(set(first_plans)), first_plans  # no id used twice
-    assert "unknown_plan" not in planned, planned[-3000:]
     _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
