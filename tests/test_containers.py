@@ -190,46 +190,54 @@ def test_a_run_split_over_two_projects_with_joined_routers(
         _compose(here, a, podman_socket, "down")
 
 
-def test_a_killed_world_container_is_restarted_and_goes_on(
+def _kill(container: str, where: Path) -> None:
+    """SIGKILL a container's main process from the host (a crash, not a stop)."""
+    pid = _run([PODMAN or "podman", "inspect", "-f", "{{.State.Pid}}", container], where, 60)
+    os.kill(int(pid.stdout.strip()), signal.SIGKILL)
+
+
+def _logs(container: str, where: Path) -> str:
+    shown = _run([PODMAN or "podman", "logs", container], where, 60)
+    return shown.stdout + shown.stderr
+
+
+def test_killed_containers_are_restarted_and_the_run_goes_on(
     tmp_path: Path, image: str, podman_socket: str
 ) -> None:
-    """kill -9 of the world's process mid-run: the restart policy starts its container
-    again, the world goes on from the state file in the container's own volume (not
-    from epoch 0), and the run ends done with everything recycled."""
+    """kill -9 of the world's process mid-run, then of robot1's planner: the restart
+    policy starts their containers again; the world goes on from the state file in its
+    container's own volume (not from epoch 0), the planner knows it restarted (its
+    volume counts its starts: no plan id used twice), and the run ends done.
+
+    Detached (`up -d`), the exit code from `wait`'s container: `up --exit-code-from`
+    stops the whole project once it sees any container exit, restart policy or not."""
     path = _generate(image, tmp_path)
     project = f"cbdi-test-k-{os.getpid()}"
-    argv = [COMPOSE or "docker-compose", "-f", str(path), "-p", project, "up",
-            "--exit-code-from", "wait"]  # fmt: skip
-    with (tmp_path / "up.log").open("w") as out:
-        up = subprocess.Popen(
-            argv, cwd=tmp_path, stdout=out, stderr=subprocess.STDOUT,
-            env={**os.environ, "DOCKER_HOST": podman_socket},
-        )  # fmt: skip
     try:
-        deadline = time.monotonic() + 600
-        world, logs = "", ""
-        while time.monotonic() < deadline and up.poll() is None:
-            world = _compose(path, project, podman_socket, "ps", "-q", "world").stdout.strip()
-            if world:
-                shown = _run([PODMAN or "podman", "logs", world], tmp_path, 60)
-                logs = shown.stdout + shown.stderr
-                if re.search(r"event=act epoch=(1\d|[2-9]\d) ", logs):
-                    break
-            time.sleep(1)
-        else:
-            pytest.fail(f"no act at epoch 10+ in the world's log: {logs[-3000:]}")
-        pid = _run([PODMAN or "podman", "inspect", "-f", "{{.State.Pid}}", world], tmp_path, 60)
-        os.kill(int(pid.stdout.strip()), signal.SIGKILL)
-        up.wait(timeout=900)
-        shown = _run([PODMAN or "podman", "logs", world], tmp_path, 60)
-        logs = shown.stdout + shown.stderr
+        started = _compose(path, project, podman_socket, "up", "-d")
+        assert started.returncode == 0, started.stderr[-3000:]
+        ids = {
+            name: _compose(path, project, podman_socket, "ps", "-q", name).stdout.strip()
+            for name in ("world", "robot1-planner", "wait")
+        }
+        deadline, logs = time.monotonic() + 600, ""
+        while not re.search(r"event=act epoch=(1\d|[2-9]\d) ", logs):
+            assert time.monotonic() < deadline, f"no act at epoch 10+: {logs[-3000:]}"
+            time.sleep(0.5)
+            logs = _logs(ids["world"], tmp_path)
+        _kill(ids["world"], tmp_path)
+        _kill(ids["robot1-planner"], tmp_path)
+        waited = _run([PODMAN or "podman", "wait", ids["wait"]], tmp_path, 900)
+        logs, planned = _logs(ids["world"], tmp_path), _logs(ids["robot1-planner"], tmp_path)
     finally:
-        if up.poll() is None:
-            up.kill()
         _compose(path, project, podman_socket, "down")
-    text = (tmp_path / "up.log").read_text()
-    assert up.returncode == 0, text[-4000:]
+    assert waited.stdout.strip() == "0", (waited.stdout, waited.stderr, logs[-3000:])
     recovered = re.search(r"event=recovered state=\S+ epoch=(\d+)", logs)
     assert recovered and int(recovered.group(1)) >= 10, logs[-4000:]  # not from epoch 0
     print("the world's container went on from epoch", recovered.group(1))
+    assert planned.count("event=ready") == 2, planned[-3000:]  # two lives
+    first_plans = re.findall(r"event=plan plan=(\S+) baseline=\"\"", planned)
+    assert len(first_plans) == len(set(first_plans)), first_plans  # no id used twice
+    assert "unknown_plan" not in planned, planned[-3000:]
+    print("robot1's planner planned", sorted(set(first_plans)))
     _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
