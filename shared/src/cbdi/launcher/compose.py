@@ -91,6 +91,7 @@ def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") ->
         f"#   {command or 'cbdi compose ' + scenario.name}",
         "# Run it (docs/containers.md):",
         "#   docker-compose -f FILE up --exit-code-from wait; docker-compose -f FILE down",
+        "#   (to live through a crash: up -d; docker wait $(docker-compose -f FILE ps -q wait))",
         "#   (or podman-compose, or docker compose)",
     ]
     return "\n".join(header) + "\n" + _yaml({"services": services}) + "\n"
