@@ -127,45 +127,34 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
     tmp_path: Path,
 ) -> None:
     log, record = tmp_path / "up.log", tmp_path / "run.mcap"
-    # The world waits for the stopped planner's ack up to the (shortened) ack timeout; the
-    # planner is killed at the 10 s kill limit and its restart joins the next epoch.
-    up = _up(log, "--record", str(record), env={"CBDI_ACK_TIMEOUT": "30"})
-    planner = 0
+    # The planner freezes itself (SIGSTOP) at epoch 8, the robot acting by then. The world
+    # waits for its ack up to the (shortened) ack timeout; the planner is killed at the
+    # 10 s kill limit and its restart joins the next epoch.
+    up = _up(
+        log,
+        "--record",
+        str(record),
+        "--fault",
+        "robot1/planner:stop@8",
+        env={"CBDI_ACK_TIMEOUT": "30"},
+    )
     try:
-        # Freeze a planner at work: ready (so heard), the robot acting.
-        wait_for(
-            lambda: (
-                re.search(r"robot1/planner .*event=ready", log.read_text())
-                and "event=act " in log.read_text()
-            ),
-            timeout=120,
-            what="the robot to act",
-        )
-        planner = _started(log)["robot1/planner"]
-        os.kill(planner, signal.SIGSTOP)
-        stopped = time.monotonic()
-        frozen_line = "frozen service=robot1/planner"
-        wait_for(lambda: frozen_line in log.read_text(), timeout=20, what="the freeze reported")
-        detected = time.monotonic() - stopped
-        killed = f"pid={planner} silent_for="
-        wait_for(
-            lambda: re.search(rf"{killed}\S+ limit=10 action=kill", log.read_text()),
-            timeout=40,
-            what="the frozen planner killed (at the 10 s kill limit)",
-        )
-        with contextlib.suppress(ProcessLookupError):  # killed as frozen by now
-            os.kill(planner, signal.SIGCONT)
-        out, _ = up.communicate(timeout=240)
+        out, _ = up.communicate(timeout=300)
     finally:
         up.kill()
-        if planner:  # a stopped process takes no SIGTERM, not even its parent-death one
-            _kill_all([planner])
+        first = [int(p) for s, p in STARTED.findall(log.read_text()) if s == "robot1/planner"]
+        _kill_all(first[:1])  # a stopped process takes no SIGTERM, not even its parent-death one
     text = log.read_text()
     summary = json.loads(out)
-    print(f"frozen planner detected {detected:.2f} s after SIGSTOP")
-    assert detected < 6.0, text  # 2 s limit; generous on a loaded machine
-    report = rf"frozen service=robot1/planner pid={planner} silent_for=\S+ limit=2 action=report"
-    assert re.search(report, text)
+    planner = first[0]
+    assert "event=fault_injected fault=robot1/planner:stop@8 epoch=8" in text, text[-3000:]
+    report = rf"frozen service=robot1/planner pid={planner} silent_for=(\S+) limit=2 action=report"
+    found = re.search(report, text)
+    assert found, text[-3000:]
+    print(f"frozen planner reported after {found.group(1)} s of silence")
+    assert float(found.group(1).rstrip("s")) < 6.0, text  # 2 s limit; generous when loaded
+    killed = rf"pid={planner} silent_for=\S+ limit=10 action=kill"
+    assert re.search(killed, text), text[-3000:]
     assert "restarting service=robot1/planner exit_code=-9 restart=1" in text
     assert up.returncode == 0, text[-3000:]
     assert summary["result"] == "done" and summary["stats"]["litter_recycled"] == 3
@@ -198,16 +187,15 @@ def test_a_killed_service_is_restarted_and_the_run_completes_as_undisturbed(
         UNDISTURBED.update(sim_time=plain_summary["sim_time"], digest=plain_summary["trace_digest"])
     log = tmp_path / "up.log"
     rec = tmp_path / "run.mcap"
-    up = _up(log, "--record", str(rec), env={"CBDI_ACK_TIMEOUT": "60"})
+    fault = f"{service}:kill@8"
+    up = _up(log, "--record", str(rec), "--fault", fault, env={"CBDI_ACK_TIMEOUT": "60"})
     try:
-        acting = re.compile(r"event=act epoch=(?:[89]|[1-9]\d) ")
-        wait_for(lambda: acting.search(log.read_text()), timeout=120, what="an act at epoch 8+")
-        os.kill(_started(log)[service], signal.SIGKILL)
         out, _ = up.communicate(timeout=300)
     finally:
         up.kill()
     text = log.read_text()
     summary = json.loads(out)
+    assert f"event=fault_injected fault={fault} epoch=8" in text, text[-3000:]
     assert f"restarting service={service} exit_code=-9 restart=1" in text
     assert up.returncode == 0 and summary["result"] == "done", text[-3000:]
     assert summary["stats"]["litter_recycled"] == 3
@@ -270,12 +258,9 @@ def test_a_killed_recorder_keeps_what_it_recorded_and_its_restart_goes_on(
     the publishers' caches (history), each message once: every epoch is in the file."""
     rec = tmp_path / "run.mcap"
     log = tmp_path / "up.log"
-    up = _up(log, "--speed", "2", "--record", str(rec))
+    # At speed 2 the monitor has flushed (every 0.5 wall s) several epochs by epoch 10.
+    up = _up(log, "--speed", "2", "--record", str(rec), "--fault", "monitor:kill@10")
     try:
-        acting = re.compile(r"event=act epoch=(?:[89]|[1-9]\d) ")
-        wait_for(lambda: acting.search(log.read_text()), timeout=120, what="an act at epoch 8+")
-        time.sleep(1.0)  # a flush or two of the epochs so far
-        os.kill(_started(log)["monitor"], signal.SIGKILL)
         out, _ = up.communicate(timeout=240)
     finally:
         up.kill()
@@ -296,7 +281,7 @@ def test_a_killed_recorder_keeps_what_it_recorded_and_its_restart_goes_on(
     (tmp_path / "run-001.mcap").rename(tmp_path / "later.mcap")
     before = epochs(rec)
     (tmp_path / "later.mcap").rename(tmp_path / "run-001.mcap")
-    assert before[0] == 0 and before == list(range(len(before))) and len(before) >= 8, before
+    assert before[0] == 0 and before == list(range(len(before))) and len(before) >= 5, before
     # The two parts: every epoch of the run, once, in order.
     assert whole == list(range(summary["epochs"] + 1)), whole
     recovered = re.findall(r"event=recorded .*recovered=(\d+) already_recorded=(\d+)", text)
@@ -319,15 +304,12 @@ def _ticks(record: Path) -> list[tuple[int, float]]:
 
 
 def _kill_world(tmp_path: Path, *args: str) -> tuple[dict[str, Any], Path, str]:
-    """Run paper-7x7 at speed 4, recorded; SIGKILL the world once it served a request
-    of epoch 10 or later; check it went on from there to done, with no stall; return
-    the summary, the recording and the launcher's log."""
+    """Run paper-7x7 at speed 4, recorded, the world killed at epoch 10 (with `args`,
+    more faults); check it went on from there to done, with no stall; return the
+    summary, the recording and the launcher's log."""
     log, record = tmp_path / "up.log", tmp_path / "run.mcap"
-    up = _up(log, "--speed", "4", "--record", str(record), *args)
+    up = _up(log, "--speed", "4", "--record", str(record), "--fault", "world:kill@10", *args)
     try:
-        acting = re.compile(r"event=act epoch=(?:1\d|[2-9]\d) ")
-        wait_for(lambda: acting.search(log.read_text()), timeout=120, what="an act at epoch 10+")
-        os.kill(_started(log)["world"], signal.SIGKILL)
         out, _ = up.communicate(timeout=300)
     finally:
         up.kill()
@@ -363,6 +345,18 @@ def test_a_killed_world_goes_on_from_its_state_and_the_run_is_the_same(tmp_path:
     # at the start (the planner's token came after it), which a replay does not repeat.
     if same and "event=search_resent" not in text:
         assert replayed.returncode == 0 and "same: " in replayed.stdout, replayed.stdout[-2000:]
+
+
+@pytest.mark.timeout(400)
+def test_the_world_and_a_planner_killed_in_one_epoch_go_on_to_done(tmp_path: Path) -> None:
+    """Two faults at once: the restarted planner rejoins while the world is restarting
+    too; neither waits for an ack the other's restart lost (issue 15's double fault)."""
+    summary, record, text = _kill_world(tmp_path, "--fault", "robot1/planner:kill@10")
+    assert "event=fault_injected fault=robot1/planner:kill@10 epoch=10" in text, text[-3000:]
+    assert "restarting service=robot1/planner exit_code=-9 restart=1" in text
+    assert "upstream_late" not in text, text[-3000:]
+    epochs = [epoch for epoch, _ in _ticks(record)]
+    assert sorted(set(epochs)) == list(range(summary["epochs"] + 1)), epochs
 
 
 @pytest.mark.timeout(300)

@@ -133,6 +133,70 @@ async def test_the_percepts_wait_for_the_tick_and_outcomes_they_count() -> None:
     assert late.met(Need(WORLD, 5))
 
 
+async def test_a_restarted_worlds_repeat_of_an_epoch_released_is_had_not_handled_twice() -> None:
+    """A world killed right after it published epoch k cannot know whether that went
+    out: its restart publishes epoch k again. A gate that released k counts the repeat as
+    received (the next percepts count it) and hands none of it out; a gate that had lost
+    k (it never came) gets it from the repeat."""
+    from cbdi.wire.world import ActionOutcome
+
+    clock, outcomes, percepts = (
+        "cbdi/world/clock",
+        "cbdi/world/outcomes/r1",
+        "cbdi/world/percepts/r1",
+    )
+
+    def tick(e: int) -> Tick:
+        return Tick(epoch=e, time=float(e), epoch_duration=1.0, speed=0.0, lockstep=True)
+
+    def seen(e: int, sent: dict[str, int]) -> Percepts:
+        return Percepts(
+            agent="r1", epoch=e, time=float(e), position=(0, 0), depth=1,
+            free=[], blocked=[], items=[], holding=[], sent=sent,
+        )  # fmt: skip
+
+    def done(e: int) -> ActionOutcome:
+        return ActionOutcome(
+            agent="r1", request_id=f"a{e}", action="move", status="succeeded", reason="",
+            epoch=e, time=float(e),
+        )  # fmt: skip
+
+    async def old_life(gate: EpochGate, epochs: int) -> None:
+        for e in range(epochs):  # ticks 0..e, an outcome each epoch from 1 on
+            await gate.put(item(clock, e + 1, 3 * e, tick(e)))
+            if e:
+                await gate.put(item(outcomes, e, 3 * e + 1, done(e)))
+            await gate.put(item(percepts, e + 1, 3 * e + 2, seen(e, {outcomes: e} if e else {})))
+            await gate.wait([Need(WORLD, e)], timeout=1)
+
+    had = EpochGate([clock, "cbdi/world/*/r1"])
+    await old_life(had, 11)  # epochs 0..10 released
+    # The new life: epoch 10 again (new counts), then epoch 11.
+    await had.put(item(clock, 1, 1, tick(10)))
+    await had.put(item(outcomes, 1, 2, done(10)))
+    await had.put(item(percepts, 1, 3, seen(10, {outcomes: 1})))
+    await had.put(item(clock, 2, 4, tick(11)))
+    await had.put(item(outcomes, 2, 5, done(11)))
+    assert not had.met(Need(WORLD, 11))
+    await had.put(item(percepts, 2, 6, seen(11, {outcomes: 2})))
+    released = await had.wait([Need(WORLD, 11)], timeout=1)
+    assert not released.late
+    assert [(type(m).__name__, m.epoch) for _, m in released.messages] == [  # type: ignore[attr-defined]
+        ("Tick", 11),
+        ("ActionOutcome", 11),
+        ("Percepts", 11),
+    ]
+
+    lost = EpochGate([clock, "cbdi/world/*/r1"])
+    await old_life(lost, 10)  # epoch 10 never came: the gate waits for it
+    assert not lost.met(Need(WORLD, 10))
+    await lost.put(item(clock, 1, 1, tick(10)))
+    await lost.put(item(outcomes, 1, 2, done(10)))
+    await lost.put(item(percepts, 1, 3, seen(10, {outcomes: 1})))
+    again = await lost.wait([Need(WORLD, 10)], timeout=1)
+    assert [m.epoch for _, m in again.messages] == [10, 10, 10] and not again.late  # type: ignore[attr-defined]
+
+
 async def test_a_late_sender_is_named_and_what_came_is_taken() -> None:
     gate = EpochGate([BELIEFS, "cbdi/r1/scheduler/ack"])
     await gate.put(item(BELIEFS, 1, 1, beliefs(0)))

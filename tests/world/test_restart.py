@@ -4,8 +4,9 @@ The paper's run in one process on the in-memory bus (as `tests/test_in_process.p
 lockstep: the world is stopped where it is at some epoch (its bus closes, its token
 goes), and a new world service with the same settings and state file takes over. The
 agents' services are never told: the executor asks the silent world again, every member
-sends its latest ack again when the world's token comes back, and the run ends with
-the undisturbed run's request trace, epoch for epoch.
+sends its latest ack again when the world's token comes back, the new world publishes
+the epoch it was stopped in again (what a member had is not handled twice), and the
+run ends with the undisturbed run's request trace, epoch for epoch.
 """
 
 from __future__ import annotations
@@ -90,9 +91,12 @@ async def test_a_restarted_world_goes_on_with_the_same_run(tmp_path: Path, every
     stopped, ticks = await run(tmp_path / "world.state", [10, 23], every)
     assert stopped.reason == "done" and not stopped.stalls
     assert (stopped.trace_digest, stopped.epoch) == (plain.trace_digest, plain.epoch)
-    # Three worlds (each one's ticks numbered from 1), every epoch published once.
-    assert [epoch for epoch, _ in ticks] == list(range(plain.epoch + 1))
-    assert [epoch for epoch, seq in ticks if seq == 1] == [0, 11, 24]
+    # Three worlds (each one's ticks numbered from 1), every epoch published once but
+    # the two the world was stopped in: its restart publishes them again (a crash may
+    # have lost them in Zenoh's queue), and the members take the repeat as had.
+    expected = sorted([*range(plain.epoch + 1), 10, 23])
+    assert [epoch for epoch, _ in ticks] == expected
+    assert [epoch for epoch, seq in ticks if seq == 1] == [0, 10, 23]
 
 
 async def test_a_world_restarted_untold_goes_on_from_the_state_file_it_finds(
@@ -106,5 +110,5 @@ async def test_a_world_restarted_untold_goes_on_from_the_state_file_it_finds(
     state = tmp_path / "world.state"
     stopped, ticks = await run(state, [10, 23], 20, resume="if-found")
     assert (stopped.trace_digest, stopped.epoch) == (plain.trace_digest, plain.epoch)
-    assert [epoch for epoch, seq in ticks if seq == 1] == [0, 11, 24]
+    assert [epoch for epoch, seq in ticks if seq == 1] == [0, 10, 23]
     assert not state.exists()

@@ -63,6 +63,8 @@ class _Sender:
     acks: dict[tuple[int, int], EpochAck] = field(default_factory=dict)
     world_epoch: int = -1
     world_sent: dict[int, dict[str, int]] = field(default_factory=dict)  # percepts' `sent`
+    released: int = -1  # the world's latest epoch a gate released
+    replayed: int = -1  # a restarted world publishes its epochs up to this again: had
 
 
 class EpochGate:
@@ -106,9 +108,16 @@ class EpochGate:
                 # update of the old series applied to the new one), its acks too.
                 s.received, s.buffer = {}, []
                 s.acks = {k: a for k, a in s.acks.items() if k[0] < 0}
+                # A restarted world publishes its last epoch again (it cannot know
+                # whether that went out before the crash): what we released is had.
+                # Its percepts' counts were of the old life's keys: gone with it.
+                s.replayed = s.released
+                s.world_epoch, s.world_sent = -1, {}
             s.received[key] = max(s.received.get(key, 0), seq)
             if isinstance(msg, EpochAck):
                 self._ack(msg)
+            elif 0 <= _epoch_of(msg) <= s.replayed:
+                pass  # counted as received (what follows counts it), not handled twice
             else:
                 s.buffer.append(item)
                 if isinstance(msg, PERCEPTS):
@@ -196,6 +205,7 @@ class EpochGate:
             )
             # And what the percepts' `sent` covers that was recovered after them.
             sent = self._world_sent(need.epoch) if need.epoch >= 0 else {}
+            s.released = max(s.released, need.epoch)
             head = s.buffer[:cut]
             after = s.buffer[cut:]
             covered = [i.seq and i.seq <= sent.get(i.key, 0) for i in after]
@@ -223,6 +233,13 @@ class EpochGate:
         s = self._of(sender)
         taken, s.buffer = s.buffer, []
         return [(i.key, i.message) for i in _in_order(taken)]
+
+
+def _epoch_of(msg: Message) -> int:
+    """The epoch a world message belongs to (its tick, outcomes, percepts, snapshot all
+    say it); -1 when it says none, so that it is never taken for a repeat."""
+    epoch = getattr(msg, "epoch", -1)
+    return epoch if isinstance(epoch, int) else -1
 
 
 def _in_order(items: list[Stamped]) -> list[Stamped]:

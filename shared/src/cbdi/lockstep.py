@@ -131,10 +131,16 @@ class Lockstep:
             if self.keep_ticks or not isinstance(e.message, Tick):
                 await self.gate.put(e)
         self.early = []
-        self.gate.joined = tick.epoch
         # A first tick past epoch 0: the world's counts in its percepts include ticks
-        # sent before we listened (other senders' acks count only what we can have).
+        # sent before we listened.
         self.gate.late_world = tick.epoch > 0
+        if tick.epoch > 0:
+            # A member that restarted mid-run and heard a tick before `rejoin` asked for
+            # one. It may be a restarted world's repeat of an epoch whose acks went by
+            # before we listened: joined as `rejoin` joins, from the next epoch.
+            self.gate.joined, self.gate.rebase = tick.epoch + 1, True
+        else:
+            self.gate.joined = 0
         self.start(tick.epoch)
         return []
 

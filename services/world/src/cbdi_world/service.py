@@ -10,8 +10,9 @@ With `--state FILE` it saves its state every epoch and notes every request it se
 (`cbdi_world.recovery`); restarted (`--restart` above 0, `CBDI_RESTART` from `cbdi up`)
 it goes on from that file at the epoch it was killed in, without the start barrier: the
 members send their latest acks again when its liveliness token comes back
-(`cbdi.lockstep.announce_ready`), and a request it already served (an executor asking
-again after losing the reply) gets the same reply, once.
+(`cbdi.lockstep.announce_ready`), a request it already served (an executor asking
+again after losing the reply) gets the same reply, once, and in lockstep the epoch it
+was killed in goes out again (a member that had it takes the repeat as had).
 """
 
 from __future__ import annotations
@@ -252,7 +253,11 @@ class WorldService:
             saved=self.saved_at,
             published=published,
         )
-        if not published:
+        # In lockstep it goes out again even if it went out: a crash right after the
+        # publication may lose what Zenoh had not sent yet, and every member waits for
+        # its percepts; a member that had it takes the repeat as had (`EpochGate`). In
+        # real time the next epoch comes anyway.
+        if not published or self.settings.lockstep:
             await self.publish_epoch(result)
             self.note(Published(result.epoch))
         await self.check_end()

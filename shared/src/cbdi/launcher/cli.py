@@ -26,10 +26,12 @@ from cbdi.launcher.scenario import (
     load_scenario,
     performer_actions,
 )
+from cbdi.launcher.services import plan_services
 from cbdi.launcher.watch import TICK
+from cbdi.runtime.fault import parse_faults
 from cbdi.simulator import load_simulator, parse_option_pairs, read_options
 
-__all__ = ["main", "scenario_arguments", "scenario_from_args"]
+__all__ = ["check_faults", "main", "scenario_arguments", "scenario_from_args"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INCOMPLETE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 PLANNER_COUNTS = ("plans", "replans", "forecast_repairs", "improvements", "search_rounds")
@@ -108,6 +110,15 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default=[],
         metavar="SERVICE=SECONDS",
         help="start a service (e.g. robot1/scheduler) late, to try another start order",
+    )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="SERVICE:KIND@EPOCH",
+        help="inject a fault: SERVICE (world, robot1/planner, router, ...) is killed "
+        "(kill: SIGKILL) or frozen (stop: SIGSTOP) as the world's epoch EPOCH reaches it, "
+        "in its first life only; repeatable (docs/faults.md)",
     )
     p.add_argument(
         "--heartbeat",
@@ -227,6 +238,22 @@ def _delays(entries: Sequence[str], scenario: Scenario) -> dict[str, float]:
     return delays
 
 
+def check_faults(entries: Sequence[str], scenario: Scenario, record: str = "") -> str:
+    """Parse `--fault` entries against the run's services; return them as `CBDI_FAULT`
+    says them ('' for none). ConfigError names the entry and the known services."""
+    try:
+        faults = parse_faults(entries)
+    except ValueError as exc:
+        raise ConfigError("--fault", ",".join(entries), str(exc)) from None
+    services = {p.service for p in plan_services(scenario, "tcp/127.0.0.1:0", record)}
+    for fault in faults:
+        if fault.service not in services:
+            known = ", ".join(sorted(services))
+            reason = f"no such service in this run (known: {known})"
+            raise ConfigError("--fault", str(fault), reason)
+    return ",".join(map(str, faults))
+
+
 def _check_liveness(heartbeat: float, limit: float) -> None:
     """Refuse a heartbeat the freeze limit could not hear twice (or non-finite values)."""
     if not (math.isfinite(heartbeat) and heartbeat >= 0):
@@ -258,6 +285,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     try:
         delays = _delays(args.delay, scenario)
+        faults = check_faults(args.fault, scenario, args.record)
         _check_liveness(args.heartbeat, args.freeze_limit)
         if not (math.isfinite(args.freeze_kill) and args.freeze_kill >= args.freeze_limit):
             raise ConfigError(
@@ -281,6 +309,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         agent_process=args.agent_process,
         secure=args.secure,
         run_dir=args.run_dir,
+        faults=faults,
     )
     say = _say_factory(args.quiet)
     summary: RunSummary = uvloop.run(launch(scenario, opts, say))  # type: ignore[arg-type]

@@ -30,6 +30,7 @@ from cbdi.errors import ConfigError
 from cbdi.launcher.cli import scenario_arguments, scenario_from_args
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
+from cbdi.runtime.fault import FAULT_ENV, parse_faults
 from cbdi.runtime.life import LIFE_ENV
 from cbdi.security import CREDENTIALS_ENV, RunSecrets, create_secrets, grants
 from cbdi.security.policy import COMPOSE_GRANTS
@@ -65,6 +66,9 @@ class ComposeOptions:
     # The run's secrets on the host (`cbdi compose` writes them), mounted read-only in
     # every container; "" : no security (docs/security.md).
     secrets: str = "./secrets"
+    # Faults to inject (`--fault SERVICE:KIND@EPOCH`, `cbdi.runtime.fault`): each goes
+    # into its service's environment; the container's life file keeps it to the first life.
+    faults: tuple[str, ...] = ()
 
 
 def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") -> str:
@@ -75,12 +79,15 @@ def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") ->
     record = f"{RUNS_IN_CONTAINER}/{opts.record or scenario.name + '.mcap'}"
     plans = plan_services(scenario, listen, record, _in_image)
     wanted = _parts(scenario, opts.only)
+    faults = _faults(opts.faults, [p.service for p in plans])
     services: dict[str, Any] = {}
     for plan in plans:
         part = agent_of(plan.service) or WORLD_PART
         if plan.service != "router" and part not in wanted:
             continue
         services[_name(plan.service)] = _service(plan, opts, connect)
+        if plan.service in faults:
+            services[_name(plan.service)]["environment"][FAULT_ENV] = faults[plan.service]
     if WORLD_PART in wanted:
         until = "done" if scenario.run.until == "done" else "time_limit"
         args = ("wait", "--until", until, "--timeout", str(opts.timeout))
@@ -95,6 +102,23 @@ def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") ->
         "#   (or podman-compose, or docker compose)",
     ]
     return "\n".join(header) + "\n" + _yaml({"services": services}) + "\n"
+
+
+def _faults(entries: Sequence[str], services: Sequence[str]) -> dict[str, str]:
+    """Return each faulted service's fault; the router counts no restarts (it has no
+    volume of its own), so a fault of it would strike each of its lives: refused."""
+    try:
+        faults = parse_faults(entries)
+    except ValueError as exc:
+        raise ConfigError("--fault", ",".join(entries), str(exc)) from None
+    allowed = [s for s in services if s != "router"]
+    for fault in faults:
+        if fault.service not in allowed:
+            known = ", ".join(sorted(allowed))
+            raise ConfigError(
+                "--fault", str(fault), f"not a service a container run can fault ({known})"
+            )
+    return {f.service: str(f) for f in faults}
 
 
 def _parts(scenario: Scenario, only: tuple[str, ...]) -> set[str]:
@@ -281,6 +305,15 @@ def _parser() -> argparse.ArgumentParser:
         default=True,
         help="authenticated services, access control at the router (default)",
     )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="SERVICE:KIND@EPOCH",
+        help="inject a fault: SERVICE (world, robot1/planner, ...) is killed (kill) or "
+        "frozen (stop) as the world's epoch EPOCH reaches it, in its container's first "
+        "life only; repeatable (docs/faults.md)",
+    )
     return p
 
 
@@ -319,6 +352,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         wait_agents=args.wait_agents,
         timeout=args.timeout,
         secrets=args.secrets if args.secure else "",
+        faults=tuple(args.fault),
     )
     try:
         scenario = scenario_from_args(args)

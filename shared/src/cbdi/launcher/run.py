@@ -81,6 +81,8 @@ class LaunchOptions:
     # per service, under `run_dir` (default: `cbdi.security.run_dir(port)`).
     secure: bool = True
     run_dir: str = ""
+    # Faults to inject (`--fault`, `cbdi.runtime.fault`), as `CBDI_FAULT` says them.
+    faults: str = ""
 
 
 def free_port() -> int:
@@ -141,7 +143,14 @@ async def _launch(
     try:
         state = f"{state_dir}/world.state"
         specs = run_specs(
-            scenario, endpoint, opts.record, opts.heartbeat, opts.agent_process, state, secrets
+            scenario,
+            endpoint,
+            opts.record,
+            opts.heartbeat,
+            opts.agent_process,
+            state,
+            secrets,
+            opts.faults,
         )
     except BaseException:
         shutil.rmtree(state_dir, ignore_errors=True)

@@ -7,6 +7,7 @@ from cbdi import keys
 from cbdi.launcher.process import ProcessSpec, console_script
 from cbdi.launcher.scenario import Scenario
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
+from cbdi.runtime.fault import FAULT_ENV
 from cbdi.runtime.host import SEPARATOR as HOST_SEPARATOR
 from cbdi.security import CREDENTIALS_ENV, RunSecrets
 
@@ -26,16 +27,18 @@ def run_specs(
     agent_process: bool = False,
     state: str = "",
     secrets: RunSecrets | None = None,
+    faults: str = "",
 ) -> list[ProcessSpec]:
     """Return the run's processes: one per service, or with `agent_process` one per BDI
     agent (`robot1/agent`, running its components with `cbdi agent`). The world saves
     its state to the file `state` (none if ''). With `secrets`, each service logs in
-    with its own credentials and the router checks them."""
-    beat = {"CBDI_HEARTBEAT": str(heartbeat)}
+    with its own credentials and the router checks them. Every process gets the
+    `faults` to inject (`CBDI_FAULT`); each service takes the ones naming it."""
+    common = {"CBDI_HEARTBEAT": str(heartbeat), **({FAULT_ENV: faults} if faults else {})}
     # A fixed hash seed: no decision may hang on the order of a set of strings.
-    env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **beat}
+    env = {"CBDI_CONNECT": endpoint, "PYTHONHASHSEED": "0", **common}
     world = {**env, "CBDI_LINGER": str(WORLD_LINGER), **({"CBDI_STATE": state} if state else {})}
-    router = dict(beat)
+    router = dict(common)
     if secrets is not None:
         router |= {"CBDI_USERS": str(secrets.users), "CBDI_ACL": str(secrets.acl)}
     own = {"router": router, "world": world}

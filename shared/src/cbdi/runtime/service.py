@@ -26,15 +26,18 @@ import uvloop
 
 from cbdi import keys
 from cbdi.bus.base import Bus
+from cbdi.bus.typed import messages
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig, open_bus
 from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
+from cbdi.runtime.fault import Fault, parse_faults, planned_fault, strike
 from cbdi.runtime.life import end_cleanly
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent
 from cbdi.security.secrets import read_credentials, read_zenoh_settings
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
+from cbdi.wire.world import Tick
 
 __all__ = ["Hosted", "ServiceContext", "ServiceSettings", "run_service", "run_services"]
 
@@ -63,6 +66,13 @@ class ServiceSettings:
     zenoh_config: str = field(
         default="",
         metadata={"help": 'JSON file of more Zenoh settings, {"path/of/key": value} (TLS)'},
+    )
+    fault: tuple[str, ...] = field(
+        default=(),
+        metadata={
+            "help": "faults to inject, SERVICE:KIND@EPOCH (kill or stop, e.g. world:kill@12); "
+            "the ones naming this service strike in its first life (cbdi.runtime.fault)"
+        },
     )
 
     def bus_config(self) -> BusConfig:
@@ -181,6 +191,7 @@ def run_services(services: Sequence[Hosted]) -> int:
             beat = s.settings.heartbeat
             if not (math.isfinite(beat) and beat >= 0):
                 raise ValueError(f"heartbeat must be a finite number >= 0, got {beat}")
+            parse_faults(s.settings.fault)
         except ValueError as exc:
             print(f"{s.service}: bad settings: {exc}")
             return 2
@@ -264,8 +275,23 @@ async def _supervise(ctx: ServiceContext, main: ServiceMain, heartbeat: float = 
             ctx.log.info("ready", alive=keys.alive(ctx.service))
             if heartbeat > 0:
                 tg.create_task(_beat(ctx, heartbeat, WallClock()), name="heartbeat")
+            fault = planned_fault(ctx.service, parse_faults(ctx.settings.fault))
+            if fault is not None:
+                tg.create_task(fault_at_epoch(ctx, fault), name="fault")
     except* _Stop:
         pass
+
+
+async def fault_at_epoch(
+    ctx: ServiceContext, fault: Fault, act: Callable[[Fault], None] = strike
+) -> None:
+    """Strike `fault` once the world's tick of its epoch (or a later one) reaches us."""
+    ctx.log.info("fault_planned", fault=str(fault))
+    async for _, tick in messages(ctx.bus, keys.world_stream("clock"), Tick, ctx):
+        if tick.epoch >= fault.epoch:
+            ctx.log.warning("fault_injected", fault=str(fault), epoch=tick.epoch)
+            act(fault)
+            return
 
 
 async def _beat(ctx: ServiceContext, period: float, clock: Clock) -> None:
