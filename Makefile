@@ -6,8 +6,12 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner domains/recycling domains/courier
 PYTEST_ARGS ?=
+# Tests run in two workers (pytest-xdist); each takes router ports from a range of its
+# own (tests/conftest.py), and the container tests stay together on one worker.
+PYTEST_WORKERS ?= 2
+PYTEST_PARALLEL = -n $(PYTEST_WORKERS) --dist loadgroup
 
-.PHONY: venv demo test lint bench bench-planner bench-continual bench-table1 clean system-tools image
+.PHONY: venv demo test test-fast lint bench bench-planner bench-continual bench-table1 clean system-tools image
 
 venv: $(STAMP)
 
@@ -44,7 +48,12 @@ image:
 	sh tools/image.sh
 
 test: venv system-tools
-	$(BIN)/python -m pytest $(PYTEST_ARGS)
+	$(BIN)/python -m pytest $(PYTEST_PARALLEL) --durations=20 $(PYTEST_ARGS)
+
+# The inner loop: unit and in-memory tests only (no real processes over Zenoh, no
+# containers), about a minute on 2 cores. `make test` stays the whole suite.
+test-fast: venv
+	$(BIN)/python -m pytest $(PYTEST_PARALLEL) -m "not e2e" $(PYTEST_ARGS)
 
 lint: venv
 	$(BIN)/ruff check shared services domains tests benchmarks docs/tutorial

@@ -2,13 +2,23 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from cbdi.launcher.ports import PORTS_ENV
 from tests_support import BIN, Proc, free_port
+
+# Each test worker (pytest-xdist: gw0, gw1, ...) takes ports from a range of its own,
+# below the kernel's ephemeral ports (32768 on): its routers (the tests' and every `cbdi
+# up` it starts, which inherits the variable) cannot collide with another worker's, nor
+# with an outgoing connection's source port.
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw") or 0)
+_SPAN = 1500
+os.environ.setdefault(PORTS_ENV, f"{20000 + _WORKER * _SPAN}-{20000 + (_WORKER + 1) * _SPAN - 1}")
 
 
 @pytest.fixture
@@ -38,3 +48,12 @@ def router(spawn: object) -> Iterator[str]:
         assert time.monotonic() < deadline, "router did not come up"
         time.sleep(0.05)
     yield endpoint
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Start the container tests first, on one worker (`--dist loadgroup`): their image
+    build is the suite's longest step, and runs beside the other worker's tests."""
+    for item in items:
+        if item.path.name == "test_containers.py":
+            item.add_marker(pytest.mark.xdist_group("containers"))
+    items.sort(key=lambda item: item.path.name != "test_containers.py")

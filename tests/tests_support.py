@@ -5,21 +5,22 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from cbdi.launcher.ports import free_port as _free_port
+
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
 
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A free loopback port in this test worker's own range (`CBDI_PORTS`, set by
+    conftest): never one another worker or an outgoing connection can take meanwhile."""
+    return _free_port()
 
 
 class Proc:

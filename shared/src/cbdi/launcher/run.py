@@ -21,7 +21,6 @@ from __future__ import annotations
 import asyncio
 import shutil
 import signal
-import socket
 import sys
 import tempfile
 import time
@@ -35,6 +34,7 @@ from cbdi.bus.base import Bus
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
+from cbdi.launcher.ports import free_port
 from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import plan_services
@@ -83,13 +83,6 @@ class LaunchOptions:
     run_dir: str = ""
     # Faults to inject (`--fault`, `cbdi.runtime.fault`), as `CBDI_FAULT` says them.
     faults: str = ""
-
-
-def free_port() -> int:
-    """Return a TCP port on loopback that was free a moment ago."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class _Liveliness:
