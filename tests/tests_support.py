@@ -61,7 +61,7 @@ class Proc:
         return self.popen.returncode
 
 
-def wait_for(predicate: object, timeout: float = 20.0, what: str = "condition") -> None:
+def wait_for(predicate: object, timeout: float = 90.0, what: str = "condition") -> None:
     """Poll `predicate` until true or fail the test after `timeout` seconds."""
     deadline = time.monotonic() + timeout
     while not predicate():  # type: ignore[operator]

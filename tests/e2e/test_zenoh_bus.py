@@ -24,7 +24,7 @@ async def test_pubsub_request_and_liveliness_through_router(router: str) -> None
         for i in range(50):
             await a.publish(f"cbdi/test/{i % 3}", bytes([i]), block=True)
         it = aiter(sub)
-        got = [await asyncio.wait_for(anext(it), 5) for _ in range(50)]
+        got = [await asyncio.wait_for(anext(it), 30) for _ in range(50)]
         assert [s.payload[0] for s in got] == list(range(50))  # in order, none lost
 
         async def echo(key: str, payload: bytes) -> bytes:
@@ -37,10 +37,10 @@ async def test_pubsub_request_and_liveliness_through_router(router: str) -> None
             await a.request("cbdi/test/rpc/nobody", b"x", timeout=0.3)
 
         token = await a.declare_token("cbdi/alive/test/one")
-        event = await asyncio.wait_for(anext(watch), 5)
+        event = await asyncio.wait_for(anext(watch), 30)
         assert event.alive and event.key == "cbdi/alive/test/one"
         await token.close()
-        event = await asyncio.wait_for(anext(watch), 5)
+        event = await asyncio.wait_for(anext(watch), 30)
         assert not event.alive
         server.cancel()
         await watch.aclose()
@@ -57,10 +57,10 @@ async def test_tokens_vanish_when_the_holder_closes(router: str) -> None:
         await a.declare_token("cbdi/alive/test/holder")
         seen = set()
         while "cbdi/alive/test/holder" not in seen:
-            seen.add((await asyncio.wait_for(anext(watch), 5)).key)
+            seen.add((await asyncio.wait_for(anext(watch), 30)).key)
         await a.close()  # the session ends: its token must go, as after a crash
         while True:
-            event = await asyncio.wait_for(anext(watch), 5)
+            event = await asyncio.wait_for(anext(watch), 30)
             if event.key == "cbdi/alive/test/holder":
                 assert not event.alive
                 break
@@ -78,7 +78,7 @@ async def test_peer_mode_without_router() -> None:
         sub = b.subscribe("cbdi/peer/x")
         await asyncio.sleep(0.5)
         await a.publish("cbdi/peer/x", b"hi", block=True)
-        assert (await asyncio.wait_for(anext(aiter(sub)), 5)).payload == b"hi"
+        assert (await asyncio.wait_for(anext(aiter(sub)), 30)).payload == b"hi"
     finally:
         await a.close()
         await b.close()
