@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import io
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -83,6 +84,22 @@ def test_strike_kills_or_stops_the_process_it_runs_in() -> None:
         assert out.strip() == b"survived"
     finally:
         stopped.kill()
+
+
+def test_strike_kills_a_containers_init_process_too() -> None:
+    """As pid 1 of its own pid namespace (a container's main process) a process cannot
+    signal itself to death: the kill is then an exit with nothing flushed (137)."""
+    unshare = shutil.which("unshare")
+    assert unshare, "unshare (util-linux) is missing"
+    code = (
+        "import os; from cbdi.runtime.fault import Fault, strike\n"
+        "print(os.getpid(), flush=True); strike(Fault('x', 'kill', 0)); print('survived')"
+    )
+    done = subprocess.run(
+        [unshare, "--pid", "--fork", sys.executable, "-c", code], capture_output=True, timeout=60
+    )
+    assert done.stdout.split() == [b"1"], done.stdout + done.stderr
+    assert done.returncode == 128 + signal.SIGKILL
 
 
 def _paper(agents: int = 2):  # type: ignore[no-untyped-def]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import re
 import signal
+import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Literal
@@ -89,5 +90,16 @@ def planned_fault(
 
 
 def strike(fault: Fault) -> None:
-    """Do the fault to this very process (the caller has logged it)."""
+    """Do the fault to this very process (the caller has logged it).
+
+    A container's main process is its namespace's init (pid 1), which the kernel
+    shields from signals it sent itself: a kill is then an exit with nothing flushed
+    or closed (`os._exit`, code 137 as for SIGKILL), a stop a thread that never again
+    lets the event loop turn (the heartbeat stops: frozen)."""
     os.kill(os.getpid(), SIGNALS[fault.kind])
+    if os.getpid() != 1:
+        return  # a stop continued (SIGCONT): the process goes on
+    if fault.kind == "kill":
+        os._exit(128 + signal.SIGKILL)
+    while True:
+        time.sleep(3600)
