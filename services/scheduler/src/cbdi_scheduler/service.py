@@ -316,6 +316,7 @@ class SchedulerService:
                 kind="revise" if revise else "start",
                 desire=c.desire.name,
                 goal=[list(g.atom) for g in c.desire.goal],
+                beliefs=self.beliefs_out.seq,  # the planner waits for these (or later)
             )
             self.last_search = replace(req, kind="start")
             return req

@@ -35,6 +35,9 @@ class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
     `problem`, if given, is a PDDL problem over the agent's domain: its objects and initial
     state replace the agent's beliefs (until the next belief update), and its goal is the
     goal when `goal` is empty. It lets a user drive one planner service directly.
+    `beliefs`: the `seq` of the sender's latest `BeliefsUpdate` when it asked (0: none
+    said); the planner searches from those beliefs or later ones, never earlier ones (in
+    real time the request may overtake them: they travel on another key).
     """
 
     agent: AgentName
@@ -43,6 +46,7 @@ class SearchRequest(Message, frozen=True, tag="cbdi.planner.SearchRequest/1"):
     desire: Id = ""
     goal: Annotated[list[Atom], msgspec.Meta(max_length=10_000)] = []
     problem: Problem = ""
+    beliefs: Count = 0
 
 
 class SearchStatus(Message, frozen=True, tag="cbdi.planner.SearchStatus/1"):

@@ -64,6 +64,15 @@ NO_COUNTING = (
 )
 
 
+
+def waits(req: SearchRequest, received: BeliefsReceiver, has_beliefs: bool) -> bool:
+    """Whether `req` must wait for beliefs: none yet, or older than the ones it was
+    asked from (a start or revision that overtook its beliefs update on the bus)."""
+    if req.kind == "cancel" or req.problem:
+        return False
+    return not has_beliefs or received.seq < req.beliefs
+
+
 @dataclass(frozen=True)
 class PlannerSettings(ServiceSettings):
     """Settings of `cbdi-planner serve`."""
@@ -235,17 +244,17 @@ class PlannerService(_Epochs):
             self.beliefs, self.now = beliefs, max(self.now, msg.time)
             self.has_beliefs = True
             self.transients.see(self.beliefs)
-            if self.deferred is not None:
+            if self.deferred is not None and not waits(self.deferred, self.beliefs_in, True):
                 req, self.deferred = self.deferred, None
                 await self.on_request(req)
         elif isinstance(msg, SearchRequest):
-            if not self.has_beliefs and msg.kind != "cancel" and not msg.problem:
+            if waits(msg, self.beliefs_in, self.has_beliefs):
                 try:
                     checked(self.domain, msg)
                 except BadRequestError as exc:
                     await self.status(msg.request_id, "failed", exc.reason)
                     raise
-                self.deferred = msg  # plan from what the agent believes, once it says
+                self.deferred = msg  # plan from the beliefs it was asked from, once here
                 return
             await self.on_request(msg)
 
@@ -468,17 +477,17 @@ class OnlinePlannerService(_Epochs):
             self.has_beliefs = True
             await asyncio.to_thread(core.warm, beliefs)  # a grounding holds no loop up
             await self.send(core.on_beliefs(beliefs, msg.time))
-            if self.deferred is not None:
+            if self.deferred is not None and not waits(self.deferred, self.beliefs_in, True):
                 req, self.deferred = self.deferred, None
                 await self.start(keys.planner_requests(core.agent), req)
         elif isinstance(msg, SearchRequest):
-            if not self.has_beliefs and msg.kind != "cancel" and not msg.problem:
+            if waits(msg, self.beliefs_in, self.has_beliefs):
                 try:
                     checked(self.core.domain, msg)
                 except BadRequestError as exc:
                     await self.send([core._status(msg.request_id, "failed", exc.reason)])
                     raise
-                self.deferred = msg  # plan from what the agent believes, once it says
+                self.deferred = msg  # plan from the beliefs it was asked from, once here
                 return
             await self.start(key, msg)
             self.has_beliefs = self.has_beliefs or bool(msg.problem)
