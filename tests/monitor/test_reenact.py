@@ -67,6 +67,25 @@ RUN = records(
 )
 
 
+def test_an_ack_logged_before_what_it_answers_is_awaited_after_sending_that() -> None:
+    """Under load the recorder may log the scheduler's ack of an epoch before the world's
+    message it answered (two senders, no causal order at the recorder): the script goes
+    by publication time, so it sends the tick before it waits for the ack."""
+    run = list(RUN)
+    tick0, beliefs0, acked = run[4], run[5], run[6]
+    # Logged: the ack first, then the tick and the beliefs; published: tick, beliefs, ack.
+    logged = [
+        RecordedMessage(acked.key, acked.payload, 4, 6, acked.seq, "", "msgpack"),
+        RecordedMessage(tick0.key, tick0.payload, 5, 4, tick0.seq, "", "msgpack"),
+        RecordedMessage(beliefs0.key, beliefs0.payload, 6, 5, beliefs0.seq, "", "msgpack"),
+    ]
+    script = script_of([*run[:4], *logged, *run[7:]], "robot1", "f.mcap")
+    assert script.steps[2:4] == [
+        Send("world", keys.CLOCK, tick0.payload),
+        Await("robot1/scheduler", 0, "beliefs"),
+    ]
+
+
 def test_a_recording_becomes_stand_ins_sends_and_waits_for_the_rebuilt_members() -> None:
     script = script_of(RUN, "robot1", "f.mcap")
     assert script.steps == [

@@ -40,6 +40,7 @@ __all__ = [
     "Output",
     "Send",
     "Step",
+    "in_sent_order",
     "outputs_of",
     "script_of",
     "sender_of",
@@ -130,7 +131,7 @@ def script_of(records: Sequence[RecordedMessage], agent: str, path: str) -> Agen
     members = [keys.member(agent, c) for c in REPLAYED]
     if not all(m in info.members for m in members):
         raise UnknownAgentError(path, agent, _bdi_agents(info.members))
-    steps, notes = _steps(records, set(members), agent)
+    steps, notes = _steps(in_sent_order(records), set(members), agent)
     outputs = outputs_of(((m.key, m.seq, m.payload) for m in records), members)
     done = [
         s.epoch for s in steps if isinstance(s, Await) and s.member == members[-1] and s.epoch >= 0
@@ -144,6 +145,22 @@ def script_of(records: Sequence[RecordedMessage], agent: str, path: str) -> Agen
         last_epoch=max(done, default=-1),
         notes=[*_stalls(records), *notes],
     )
+
+
+def in_sent_order(records: Sequence[RecordedMessage]) -> list[RecordedMessage]:
+    """Return the records in the order they were published (their senders' stamps), not
+    received: the recorder's one subscriber hears each sender in order, but two senders
+    in no causal order (a loaded router forwarded the scheduler's ack of an epoch before
+    the world's percepts it had answered), and a script in log order then waited for the
+    ack before sending what it answers: a stall. One host's clock orders them causally;
+    a sender's own messages keep their order (the sort is stable, its stamps rise). A
+    record with no stamp (0) keeps its place after the one logged before it."""
+    keyed: list[tuple[int, int]] = []
+    sent = 0
+    for i, m in enumerate(records):
+        sent = m.publish_ns or sent
+        keyed.append((sent, i))
+    return [records[i] for _, i in sorted(keyed)]
 
 
 def _stalls(records: Sequence[RecordedMessage]) -> list[str]:
