@@ -7,7 +7,7 @@ Run: python robot.py [ROUTER_ENDPOINT]
 from __future__ import annotations
 
 import asyncio
-import contextlib
+import signal
 import sys
 
 from cbdi.performer import ActionCall, Outcome, serve_performer
@@ -55,14 +55,20 @@ class Things:
 async def main(router: str) -> None:
     room = Room()
     bus = await open_as("robot1/performer", [router], timeout=60.0)  # docs/security.md
+    # Ctrl-C (or SIGTERM) ends main, whichever thread the signal lands on (Zenoh's own
+    # threads take signals too: only the loop's handler is sure to wake the loop).
+    loop, me = asyncio.get_running_loop(), asyncio.current_task()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, me.cancel)  # type: ignore[union-attr]
     try:
         async with asyncio.TaskGroup() as tasks:
             tasks.create_task(serve_performer(bus, "robot1", "carry", Carry(room)))
             tasks.create_task(run_sensor(bus, "robot1", Things(room), rate=4.0))
+    except asyncio.CancelledError:
+        pass  # stopped: the bus is closed, then exit
     finally:
         await bus.close()
 
 
 if __name__ == "__main__":
-    with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C: the bus is closed, then exit
-        asyncio.run(main(sys.argv[1] if len(sys.argv) > 1 else "tcp/127.0.0.1:7447"))
+    asyncio.run(main(sys.argv[1] if len(sys.argv) > 1 else "tcp/127.0.0.1:7447"))

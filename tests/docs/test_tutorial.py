@@ -33,6 +33,7 @@ DOC = REPO / "docs/your-own-domain.md"
 EXAMPLE = REPO / "docs/tutorial"
 HEADING = "## A complete example\n"
 SHOWN_PORT = "7447"
+FAULTHANDLER = {"PYTHONFAULTHANDLER": "1"}
 
 # A paragraph whose first line names the file, then its block.
 FILE_BLOCK = re.compile(
@@ -121,7 +122,8 @@ def test_a_transcript_line_matches_with_any_text_for_its_dots() -> None:
 def test_the_tutorial_runs_as_shown(tmp_path: Path) -> None:
     (robot_cmd, robot_out), (up_cmd, up_out), (inspect_cmd, inspect_out) = transcripts()
     port = free_port()
-    robot = Proc(argv(robot_cmd, port, tmp_path), tmp_path / "robot.log")
+    # With faulthandler: a robot that outlives its Ctrl-C shows where it hangs (SIGABRT).
+    robot = Proc(argv(robot_cmd, port, tmp_path), tmp_path / "robot.log", FAULTHANDLER)
     try:
         up = subprocess.run(
             argv(up_cmd, port, tmp_path),
@@ -133,7 +135,13 @@ def test_the_tutorial_runs_as_shown(tmp_path: Path) -> None:
         )
         assert robot.alive(), robot.output()[-3000:]
         robot.popen.send_signal(signal.SIGINT)  # Ctrl-C, as the tutorial says
-        robot.popen.wait(60)
+        try:
+            robot.popen.wait(60)
+        except subprocess.TimeoutExpired:
+            robot.popen.send_signal(signal.SIGABRT)
+            robot.popen.wait(30)
+            stacks = robot.output()[-8000:]
+            raise AssertionError(f"robot.py outlived its Ctrl-C:\n{stacks}") from None
         said = robot.output()
     finally:
         robot.stop()
