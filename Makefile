@@ -7,9 +7,9 @@ STAMP  := $(VENV)/.installed
 PACKAGES := shared services/world services/monitor services/scheduler services/executor services/planner domains/recycling domains/courier
 PYTEST_ARGS ?=
 # Tests run in two workers (pytest-xdist); each takes router ports from a range of its
-# own (tests/conftest.py), and the container tests stay together on one worker.
+# own (tests/conftest.py); a file's tests stay on one worker (one image build).
 PYTEST_WORKERS ?= 2
-PYTEST_PARALLEL = -n $(PYTEST_WORKERS) --dist loadgroup
+PYTEST_PARALLEL = -n $(PYTEST_WORKERS) --dist loadfile
 
 .PHONY: venv demo test test-fast lint bench bench-planner bench-continual bench-table1 clean system-tools image
 

@@ -51,9 +51,7 @@ def router(spawn: object) -> Iterator[str]:
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Start the container tests first, on one worker (`--dist loadgroup`): their image
-    build is the suite's longest step, and runs beside the other worker's tests."""
-    for item in items:
-        if item.path.name == "test_containers.py":
-            item.add_marker(pytest.mark.xdist_group("containers"))
+    """Start the container tests first (`--dist loadfile`: one worker runs the file, one
+    image build): the build is the suite's longest step, and runs beside the other
+    worker's tests."""
     items.sort(key=lambda item: item.path.name != "test_containers.py")
