@@ -25,11 +25,15 @@ def ctl(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
 
 
+@pytest.mark.timeout(600)
 def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
     port, rec = free_port(), tmp_path / "ctl.mcap"
     endpoint = f"tcp/127.0.0.1:{port}"
     argv = [str(BIN / "cbdi"), "up", "paper-7x7", "--port", str(port), "--json", "--quiet"]
-    launcher = Proc([*argv, "--speed", "1", "--record", str(rec)], tmp_path / "up.log")
+    # Speed 0.5: the robot pursues the operator's desire for several wall seconds, long
+    # enough for `cbdi ctl` (a process per call, seconds each on a loaded machine) to
+    # see it and stop it there.
+    launcher = Proc([*argv, "--speed", "0.5", "--record", str(rec)], tmp_path / "up.log")
     try:
         wait_for(
             lambda: "started service=robot1/executor" in launcher.output(),
@@ -76,7 +80,7 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
             intention = state.get("intention") or {}
             return intention.get("desire") == "visit" and bool(intention.get("steps"))
 
-        wait_for(pursuing, timeout=60, what="robot1 to pursue the operator's desire")
+        wait_for(pursuing, timeout=120, what="robot1 to pursue the operator's desire")
         text = ctl(endpoint, "show", "robot1")
         assert text.returncode == 0 and "intention: visit (plan " in text.stdout
         assert "(move robot1 " in text.stdout and "beliefs (" in text.stdout
@@ -87,7 +91,7 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
         assert shown["halted"] and shown["intention"]["desire"] == "visit"
         time.sleep(3)  # stopped: nothing starts meanwhile
         assert ctl(endpoint, "resume", "robot1").returncode == 0
-        wait_for(lambda: not launcher.alive(), timeout=240, what="the run to end")
+        wait_for(lambda: not launcher.alive(), timeout=400, what="the run to end")
     finally:
         code = launcher.stop()
     assert code == 0, launcher.output()[-3000:]  # all litter recycled, as asked
