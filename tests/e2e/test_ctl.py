@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
@@ -23,6 +22,12 @@ pytestmark = pytest.mark.e2e
 def ctl(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
     argv = [str(BIN / "cbdi"), "ctl", *args, "--connect", endpoint, "--timeout", "20"]
     return subprocess.run(argv, capture_output=True, text=True, timeout=60, check=False)
+
+
+def now(endpoint: str) -> float:
+    """robot1's scheduler's simulated time (-1 if it does not answer now)."""
+    shown = ctl(endpoint, "show", "robot1", "--no-beliefs", "--json")
+    return float(json.loads(shown.stdout)["time"]) if shown.returncode == 0 else -1.0
 
 
 @pytest.mark.timeout(600)
@@ -89,7 +94,11 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
         assert stop.returncode == 0 and "robot1 stopped at t=" in stop.stdout, stop.stderr
         shown = json.loads(ctl(endpoint, "show", "robot1", "--no-beliefs", "--json").stdout)
         assert shown["halted"] and shown["intention"]["desire"] == "visit"
-        time.sleep(3)  # stopped: nothing starts meanwhile
+        # Stopped for 5 simulated seconds (however long that takes the loaded machine's
+        # lockstep world): nothing may start meanwhile.
+        wait_for(
+            lambda: now(endpoint) >= shown["time"] + 5.0, timeout=180, what="5 s stopped"
+        )
         assert ctl(endpoint, "resume", "robot1").returncode == 0
         wait_for(lambda: not launcher.alive(), timeout=400, what="the run to end")
     finally:
