@@ -5,12 +5,24 @@ from __future__ import annotations
 
 import asyncio
 
+import pytest
+
+import cbdi_scheduler.service as scheduler_service
 from cbdi import keys
 from cbdi.bus import LogSink, MemoryNetwork, messages, request
+from cbdi.bus.typed import serve
 from cbdi.runtime.together import Together, TogetherService
 from cbdi.wire import encode
-from cbdi.wire.agent import AgentReply, AgentRequest, AgentState, DesireEvent, StateRequest
+from cbdi.wire.agent import (
+    ActionStatus,
+    AgentReply,
+    AgentRequest,
+    AgentState,
+    DesireEvent,
+    StateRequest,
+)
 from cbdi.wire.planner import SearchRequest
+from cbdi.wire.world import EpochAck, Tick, WorldInfo, WorldInfoRequest
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
 from cbdi_scheduler.service import SchedulerSettings, scheduler_main
@@ -58,6 +70,60 @@ async def test_a_requested_desire_shows_in_the_state_and_is_pursued() -> None:
         state = await request(bus, state_key, StateRequest(), AgentState)
         assert state.intention is not None and state.intention.desire == "visit"
         assert "(in robot1 c_0_1)" in state.beliefs
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+
+async def test_a_scheduler_started_before_its_world_waits_for_it_and_keeps_lockstep(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An agent may start long before its world (another project, another machine): its
+    scheduler waits for the world's map and members however long that takes, and an
+    input that comes before the world's first tick does not make it take a lockstep run
+    for a real-time one (it acks the epochs)."""
+    monkeypatch.setattr(scheduler_service, "MAP_WAIT", 0.2)
+    network = MemoryNetwork()
+    settings = SchedulerSettings(agent="robot1", agent_file=str(AGENT))
+    mind = Mind(load_agent(AGENT, "robot1"))
+    shell = TogetherService("robot1/scheduler", settings, scheduler_main(mind, settings))
+    bus = network.bus()
+    acks = messages(bus, keys.epoch_ack("robot1", "scheduler"), EpochAck, LogSink())
+    task = asyncio.create_task(Together([shell], network, log_level="error").run())
+    try:
+        # Several waits of the world go by (it is not there): no `ready` yet.
+        await asyncio.sleep(1.0)
+        early = asyncio.ensure_future(anext(acks))
+        await asyncio.sleep(0.2)
+        assert not early.done()
+        # An input before the world's first tick (the executor says it is idle).
+        status = ActionStatus(
+            agent="robot1", plan_id="p", step_id="s", action="move", status="cancelled",
+            reason="", time=0.0,
+        )  # fmt: skip
+        await bus.publish(keys.executor_status("robot1"), encode(status))
+        info = WorldInfo(
+            map_name="room", width=4, height=3, walls=[], bins=[], agents=["robot1"],
+            detection_depth={"robot1": 1}, capacity=3, epoch_duration=1.0, durations={},
+            members=["robot1/scheduler"], lockstep=True,
+        )  # fmt: skip
+
+        async def answer(key: str, req: WorldInfoRequest) -> WorldInfo:
+            return info
+
+        world = asyncio.create_task(
+            serve(bus, keys.world_rpc("info"), WorldInfoRequest, answer, LogSink())
+        )
+        async with asyncio.timeout(30):
+            _, ready = await early
+            assert (ready.epoch, ready.stage) == (-1, "ready")
+            tick = Tick(epoch=0, time=0.0, epoch_duration=1.0, speed=0.0, lockstep=True)
+            await bus.publish(keys.world_stream("clock"), encode(tick))
+            await bus.publish(keys.world_percepts("robot1"), encode(percepts(0)))
+            while (ack := (await anext(acks))[1]).epoch < 0:
+                pass
+        assert (ack.epoch, ack.stage) == (0, "beliefs")
+        world.cancel()
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)

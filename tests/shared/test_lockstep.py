@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import asyncio
 
-from cbdi import keys
+import pytest
+
+from cbdi import keys, lockstep
 from cbdi.bus import LogSink, MemoryNetwork, messages
-from cbdi.bus.typed import Stamped
-from cbdi.lockstep import WORLD, EpochGate, Need, resend_latest_ack, send_ack
+from cbdi.bus.typed import Stamped, serve
+from cbdi.lockstep import WORLD, EpochGate, Lockstep, Need, resend_latest_ack, send_ack
 from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.base import Message
-from cbdi.wire.world import EpochAck, Percepts, Tick
+from cbdi.wire.world import EpochAck, Percepts, Tick, WorldInfo, WorldInfoRequest
 
 BELIEFS = "cbdi/r1/scheduler/beliefs"
 PLANS = "cbdi/r1/scheduler/plans"
@@ -266,3 +268,33 @@ async def test_a_member_sends_its_latest_ack_again_when_the_world_comes_back() -
     assert again == sent and again.epoch == 7
     resend.cancel()
     assert member.sent[keys.epoch_ack("r1", "executor")] == 2  # once, and once again
+
+
+async def test_a_world_not_up_yet_is_asked_again_not_taken_for_none(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A member that starts before its world: the failed ask is not kept as the answer
+    (a later input, once the world is up, finds the run a lockstep one)."""
+    monkeypatch.setattr(lockstep, "ASK_WORLD", 0.1)
+    network = MemoryNetwork()
+    bus = network.bus()
+    step = Lockstep([keys.world_stream("clock")], lambda first: None, bus=bus, me=S)
+    assert not await step.rejoin()
+    assert step.lockstep_member is None
+    info = WorldInfo(
+        map_name="m", width=1, height=1, walls=[], bins=[], agents=["r1"],
+        detection_depth={}, capacity=1, epoch_duration=1.0, durations={},
+        members=[S], lockstep=True,
+    )  # fmt: skip
+
+    async def answer(key: str, req: WorldInfoRequest) -> WorldInfo:
+        return info
+
+    world = asyncio.create_task(
+        serve(network.bus(), keys.world_rpc("info"), WorldInfoRequest, answer, LogSink())
+    )
+    await asyncio.sleep(0.01)
+    early = Stamped(PLANS, 1, 1, beliefs(0))
+    assert await step.put(early) == []  # kept for the first tick, not handled at once
+    assert step.lockstep_member is True and step.early == [early]
+    world.cancel()

@@ -179,6 +179,8 @@ class Lockstep:
         return [(e.key, e.message) for e in early]
 
     async def _member_of_lockstep(self) -> bool:
+        """Whether the world says we are a lockstep member. Only the world's answer is
+        kept: a world not up yet (one that starts after us) is asked again next time."""
         if self.lockstep_member is None:
             if self.bus is None or not self.me:
                 self.lockstep_member = False
@@ -186,9 +188,8 @@ class Lockstep:
                 try:
                     info = await world_info(self.bus, ASK_WORLD)
                 except (TimeoutError, CbdiError):
-                    self.lockstep_member = False  # no world: on our own, in real time
-                else:
-                    self.lockstep_member = info.lockstep and self.me in info.members
+                    return False  # no world (yet): on our own, in real time, for now
+                self.lockstep_member = info.lockstep and self.me in info.members
         return self.lockstep_member
 
 

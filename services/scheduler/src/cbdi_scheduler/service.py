@@ -59,6 +59,9 @@ INPUTS: tuple[type[Message], ...] = (
 )
 
 
+MAP_WAIT = 30.0  # wall seconds between "still waiting for the world" warnings
+
+
 @dataclass(frozen=True)
 class SchedulerSettings(ServiceSettings):
     """Settings of `cbdi-scheduler`."""
@@ -107,12 +110,22 @@ class SchedulerService:
         ]
 
     async def load_map(self) -> None:
-        """Believe the world's map (cells, `near`, bins): the paper's `map_loaded`."""
-        try:
-            info = await world_info(self.ctx.bus, timeout=30.0)
-        except (CbdiError, TimeoutError) as exc:
-            self.ctx.log.warning("no_map", error=str(exc) or "the world did not answer")
-            return
+        """Believe the world's map (cells, `near`, bins): the paper's `map_loaded`.
+
+        Waits for the world as long as it takes (saying so every `MAP_WAIT` s): an agent
+        may start well before its world (another project, another machine), and one that
+        went on without the map and the world's members would plan from nothing and
+        could take a lockstep run for a real-time one.
+        """
+        waited = 0.0
+        while True:
+            try:
+                info = await world_info(self.ctx.bus, timeout=MAP_WAIT)
+                break
+            except (CbdiError, TimeoutError) as exc:
+                waited += MAP_WAIT
+                why = str(exc) or "the world did not answer"
+                self.ctx.log.warning("waiting_for_world", waited=waited, error=why)
         self.mind.beliefs = self.mind.beliefs.adding(self.mind.knowledge.map_beliefs(info))
         self.members = list(info.members)
         me = keys.member(self.agent, "scheduler")
