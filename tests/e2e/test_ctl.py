@@ -96,9 +96,7 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
         assert shown["halted"] and shown["intention"]["desire"] == "visit"
         # Stopped for 5 simulated seconds (however long that takes the loaded machine's
         # lockstep world): nothing may start meanwhile.
-        wait_for(
-            lambda: now(endpoint) >= shown["time"] + 5.0, timeout=180, what="5 s stopped"
-        )
+        wait_for(lambda: now(endpoint) >= shown["time"] + 5.0, timeout=180, what="5 s stopped")
         assert ctl(endpoint, "resume", "robot1").returncode == 0
         wait_for(lambda: not launcher.alive(), timeout=400, what="the run to end")
     finally:

@@ -64,7 +64,6 @@ NO_COUNTING = (
 )
 
 
-
 def waits(req: SearchRequest, received: BeliefsReceiver, has_beliefs: bool) -> bool:
     """Whether `req` must wait for beliefs: none yet, or older than the ones it was
     asked from (a start or revision that overtook its beliefs update on the bus)."""
