@@ -174,7 +174,6 @@ def test_a_run_split_over_two_projects_with_joined_routers(
     try:
         started = _compose(there, b, podman_socket, "up", "-d")
         assert started.returncode == 0, started.stderr[-2000:]
-        time.sleep(float(os.environ.get("TP_DELAY", "0")))
         up = _compose(here, a, podman_socket, "up", "--exit-code-from", "wait")
         if up.returncode != 0:
             logs = _compose(there, b, podman_socket, "logs", "--no-color")
