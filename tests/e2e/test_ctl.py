@@ -93,7 +93,9 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
         stop = ctl(endpoint, "stop", "--all", "--wait", "60")
         assert stop.returncode == 0 and "robot1 stopped at t=" in stop.stdout, stop.stderr
         shown = json.loads(ctl(endpoint, "show", "robot1", "--no-beliefs", "--json").stdout)
-        assert shown["halted"] and shown["intention"]["desire"] == "visit"
+        # The visit, or (a loaded machine's ctl calls came late) the recycling after it.
+        assert shown["halted"] and shown["intention"] is not None, shown
+        stopped = shown["intention"]["desire"]
         # Stopped for 5 simulated seconds (however long that takes the loaded machine's
         # lockstep world): nothing may start meanwhile.
         wait_for(lambda: now(endpoint) >= shown["time"] + 5.0, timeout=180, what="5 s stopped")
@@ -118,8 +120,8 @@ def test_an_operator_adds_removes_and_is_refused(tmp_path: Path) -> None:
 
     # The safe stop: the step running at the stop ended (a 3 s pickup at most), and no
     # step started until the resume.
-    halted = next(e.time for e in events if e.desire == "visit" and e.event == "halted")
-    resumed = next(e.time for e in events if e.desire == "visit" and e.event == "resumed")
+    halted = next(e.time for e in events if e.desire == stopped and e.event == "halted")
+    resumed = next(e.time for e in events if e.desire == stopped and e.event == "resumed")
     still = min(
         r.time for r in of(keys.executor_arrested("robot1"), ArrestReport) if r.time >= halted
     )
