@@ -304,6 +304,15 @@ def _ticks(record: Path) -> list[tuple[int, float]]:
     return [(decode(m.payload, Tick).epoch, m.publish_ns / 1e9) for m in found]
 
 
+def _story(text: str) -> str:
+    """What a failed run's log says of what went wrong: its warnings and errors, and the
+    agent's last commands and steps (the tail of a log is only the shutdown)."""
+    lines = text.splitlines()
+    bad = [ln for ln in lines if "level=warning" in ln or "level=error" in ln]
+    acts = [ln for ln in lines if "event=command" in ln or "event=step" in ln]
+    return "\n".join(["warnings and errors:", *bad[:40], "last commands and steps:", *acts[-40:]])
+
+
 def _kill_world(tmp_path: Path, *args: str) -> tuple[dict[str, Any], Path, str]:
     """Run paper-7x7 at speed 4, recorded, the world killed at epoch 10 (with `args`,
     more faults); check it went on from there to done, with no stall; return the
@@ -319,7 +328,7 @@ def _kill_world(tmp_path: Path, *args: str) -> tuple[dict[str, Any], Path, str]:
     recovered = re.search(r"world .*event=recovered state=\S+ epoch=(\d+)", text)
     assert recovered and int(recovered.group(1)) >= 10, text[-3000:]
     summary = json.loads(out)
-    assert up.returncode == 0 and summary["result"] == "done", text[-3000:]
+    assert up.returncode == 0 and summary["result"] == "done", _story(text)
     assert summary["stats"]["litter_recycled"] == 3
     assert "ack_timeout" not in text and not any(summary["stalls"].values()), text[-3000:]
     return summary, record, text

@@ -298,3 +298,21 @@ async def test_a_world_not_up_yet_is_asked_again_not_taken_for_none(
     assert await step.put(early) == []  # kept for the first tick, not handled at once
     assert step.lockstep_member is True and step.early == [early]
     world.cancel()
+
+
+async def test_a_lost_sample_costs_one_timeout_not_one_per_epoch() -> None:
+    """An ack counts a sample that never comes (lost on the way, on a key sent on once):
+    the gate waits for it once, then takes it as lost; the next epoch's ack, counting
+    it still, is met at once."""
+    gate = EpochGate([BELIEFS])
+    await gate.put(ack(0, {BELIEFS: 1}))
+    first = await gate.wait([Need(S, 0)], 0.05)
+    assert first.late == [S] and first.messages == []
+    await gate.put(ack(1, {BELIEFS: 1}, seq=2))
+    second = await gate.wait([Need(S, 1)], 30.0)
+    assert second.late == []
+    # It comes after all: taken at the next gate, as anything late is.
+    await gate.put(item(BELIEFS, 1, 1, beliefs(0)))
+    await gate.put(ack(2, {BELIEFS: 1}, seq=3))
+    third = await gate.wait([Need(S, 2)], 30.0)
+    assert third.late == [] and third.messages == [(BELIEFS, beliefs(0))]

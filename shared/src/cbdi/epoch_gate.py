@@ -64,6 +64,9 @@ class _Sender:
     world_epoch: int = -1
     world_sent: dict[int, dict[str, int]] = field(default_factory=dict)  # percepts' `sent`
     released: int = -1  # the world's latest epoch a gate released
+    # Counts given up on at a timeout: samples lost on the way (never to come, since
+    # nothing later on their key raises the count) are not waited for again.
+    given: dict[str, int] = field(default_factory=dict)
     replayed: int = -1  # a restarted world publishes its epochs up to this again: had
 
 
@@ -106,7 +109,7 @@ class EpochGate:
                 # afresh, and what its last life sent that no ack released is dropped (a
                 # new count would release it among the new life's messages: a belief
                 # update of the old series applied to the new one), its acks too.
-                s.received, s.buffer = {}, []
+                s.received, s.buffer, s.given = {}, [], {}
                 s.acks = {k: a for k, a in s.acks.items() if k[0] < 0}
                 # A restarted world publishes its last epoch again (it cannot know
                 # whether that went out before the crash): what we released is had.
@@ -157,12 +160,31 @@ class EpochGate:
         if need.sender == WORLD:
             if s.world_epoch < need.epoch:
                 return False
-            sent = self._world_sent(need.epoch)
-            return all(s.received.get(k, 0) >= n for k, n in sent.items() if self.hears(k))
+            return self._has(s, self._world_sent(need.epoch))
         ack = self._ack_for(need)
-        if ack is None:
-            return False
-        return all(s.received.get(k, 0) >= n for k, n in ack.sent.items() if self.hears(k))
+        return ack is not None and self._has(s, ack.sent)
+
+    def _has(self, s: _Sender, counts: dict[str, int]) -> bool:
+        """Whether what `counts` says was sent (on keys we hear) is here or given up."""
+        return all(
+            max(s.received.get(k, 0), s.given.get(k, 0)) >= n
+            for k, n in counts.items()
+            if self.hears(k)
+        )
+
+    def _give_up(self, need: Need) -> None:
+        """A need not met in time: what its counts say is missing is taken as lost (what
+        came is taken now, the rest never waited for again; a later sample on its key
+        raises the count past it anyway). Without an ack there is nothing to count."""
+        s = self._of(need.sender)
+        if need.sender == WORLD:
+            counts = self._world_sent(need.epoch) if s.world_epoch >= need.epoch else {}
+        else:
+            ack = self._ack_for(need)
+            counts = dict(ack.sent) if ack is not None else {}
+        for k, n in counts.items():
+            if self.hears(k) and s.received.get(k, 0) < n:
+                s.given[k] = max(s.given.get(k, 0), n)
 
     def _world_sent(self, epoch: int) -> dict[str, int]:
         """The `sent` of the world's percepts of `epoch` (or the earliest later ones)."""
@@ -183,6 +205,9 @@ class EpochGate:
                 await self.changed.wait_for(lambda: all(self.met(n) for n in needs))
         except TimeoutError:
             result.late = [n.sender for n in needs if not self.met(n)]
+            for need in needs:
+                if not self.met(need):
+                    self._give_up(need)
         async with self.changed:
             for need in needs:
                 result.messages += self._take(need)
