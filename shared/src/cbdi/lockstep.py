@@ -19,7 +19,8 @@ Resynchronisation, one rule for late, frozen and restarted members alike: a `Nee
 met within the timeout is given up for this epoch and its sender named as late; what it
 sent meanwhile is taken at the next gate, and what its counts said it had sent that never
 came is taken as lost, never waited for again (one lost sample costs one timeout, not
-one per epoch: a key sent on once, a peer's claim, would hold every gate after). A sender whose counts go back has restarted:
+one per epoch: a key sent on once, a peer's claim, would hold every gate after). A
+sender whose counts go back has restarted:
 its counts start afresh, and what its earlier life sent that no ack released is dropped.
 The world's percepts count the outcomes they close (`Percepts.sent`), since
 the bus may recover one key's samples after another's (after a router restart). A
