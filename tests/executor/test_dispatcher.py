@@ -265,3 +265,50 @@ def test_an_arrest_after_a_kept_step_stops_the_replacement_too() -> None:
     report = d2.early_arrest("p", "", 0.0).arrest
     assert report is not None and report.cancelled == ["s0", "s1"]
     assert start(d2, 0.0).requests == []
+
+
+def test_a_step_waits_for_its_conditions_up_to_its_bound_then_starts() -> None:
+    """Sensing lags an outcome: the step waits, says for what, and starts once it holds."""
+    d = Dispatcher("r", condition_wait=2.0)
+    d.load(plan("p", move(0, 0.0)), 0.0)
+    stale = FREE.removing([fact("free", "c_1_0")])
+    first = start(d, 0.0, stale)
+    assert statuses(first) == [("s0", "waiting")] and not first.requests
+    assert "(free c_1_0)" in first.statuses[0].reason
+    assert start(d, 1.0, stale).statuses == []  # said once, still waiting
+    later = start(d, 1.5, FREE)  # the reading came: it starts, later than planned
+    assert [r.action for r in later.requests] == ["move"]
+    assert statuses(later)[-1] == ("s0", "running") and later.statuses[-1].reason == ""
+
+
+def test_a_step_whose_conditions_never_come_is_refused_after_its_bound() -> None:
+    d = Dispatcher("r", condition_wait=5.0, condition_wait_for={"Move": 1.0})
+    d.load(plan("p", move(0, 0.0), move(1, 1.0)), 0.0)
+    stale = FREE.removing([fact("free", "c_1_0")])
+    assert statuses(start(d, 0.0, stale)) == [("s0", "waiting")]
+    assert start(d, 0.5, stale).statuses == []
+    out = start(d, 1.0, stale)  # the action's own bound, not the agent's
+    assert statuses(out) == [("s0", "refused"), ("s1", "cancelled")]
+    assert out.statuses[0].reason.endswith("does not hold after waiting 1 s")
+
+
+def test_with_no_bound_a_failing_step_is_refused_at_once() -> None:
+    d = Dispatcher("r")
+    d.load(plan("p", move(0, 0.0)), 0.0)
+    out = start(d, 0.0, FREE.removing([fact("free", "c_1_0")]))
+    assert statuses(out) == [("s0", "refused")]
+    assert out.statuses[0].reason == "at start condition (free c_1_0) does not hold"
+
+
+def test_bad_condition_waits_are_refused_with_what_is_wrong() -> None:
+    import pytest
+
+    from cbdi_executor.cli import main
+    from cbdi_executor.service import condition_waits
+
+    assert condition_waits(["Move=1.5", "pick=0"]) == {"move": 1.5, "pick": 0.0}
+    for bad in ("move", "move=", "=2", "move=-1", "move=nan", "move=inf", "move=x"):
+        with pytest.raises(ValueError, match="expected ACTION=SECONDS"):
+            condition_waits([bad])
+    assert main(["--condition-wait-for", "move=soon"]) == 2
+    assert main(["--condition-wait", "-3"]) == 2

@@ -40,9 +40,13 @@ def run(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, str]:
     out = tmp_path_factory.mktemp("rec") / "paper.mcap"
+    # Lockstep: the world waits for the robot every epoch, so what the tests read off the
+    # run (its first action at 0, 22 moves) does not depend on how loaded the machine is
+    # (in real time a slow first request started it at 4 s).
     result = run(
-        "cbdi", "up", "paper-7x7-scripted", "--speed", "40", "--record", str(out), "--json"
-    )
+        "cbdi", "up", "paper-7x7-scripted", "--speed", "40", "--lockstep",
+        "--record", str(out), "--json",
+    )  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     return out, json.loads(result.stdout), result.stderr
 

@@ -76,6 +76,14 @@ def write(tmp_path: Path, body: str) -> Path:
         ("transient_predicates = [3]\n", "transient_predicates[0]", "a predicate name"),
         ('transient_predicates = "free"\n', "transient_predicates", "a list"),
         ('knowledge = "warehouse"\n', "knowledge", "no domain knowledge 'warehouse'"),
+        ("[execution]\ncondition_wait = -1\n", "execution.condition_wait", ">= 0"),
+        ('[execution]\ncondition_wait = "2"\n', "execution.condition_wait", "got str"),
+        ("[execution]\nwait = 2\n", "execution.wait", "unknown setting"),
+        (
+            "[execution.condition_wait_for]\nfly = 2\n",
+            "execution.condition_wait_for.fly",
+            "no action 'fly'",
+        ),
     ],
 )
 def test_mistakes_name_the_field(tmp_path: Path, body: str, field: str, reason: str) -> None:
@@ -104,3 +112,23 @@ def test_the_domain_knowledge_comes_from_the_domain_package(tmp_path: Path) -> N
     mind = Mind(spec)
     assert isinstance(mind.knowledge, RecyclingKnowledge) and mind.knowledge.agent == "r"
     assert load_knowledge("recycling", "r2") is not load_knowledge("recycling", "r2")  # per agent
+
+
+def test_the_execution_settings_reach_the_executor(tmp_path: Path) -> None:
+    (tmp_path / "d.pddl").write_text(
+        "(define (domain d) (:action go :parameters () :precondition () :effect ()))"
+    )
+    p = tmp_path / "a.toml"
+    p.write_text(
+        'domain = "d.pddl"\n[execution]\ncondition_wait = 2\n'
+        "[execution.condition_wait_for]\nGo = 0.5\n"
+    )
+    execution = read_agent_file(p, "r").execution
+    assert execution.condition_wait == 2.0 and execution.condition_wait_for == (("go", 0.5),)
+    assert execution.executor_args() == [
+        "--condition-wait",
+        "2.0",
+        "--condition-wait-for",
+        "go=0.5",
+    ]
+    assert read_agent_file(write(tmp_path, ""), "r").execution.executor_args() == []

@@ -123,11 +123,14 @@ def test_planning_failures_retry_when_beliefs_change_then_drop() -> None:
     s = IntentionScheduler(plan_retries=2)
     s.choose(RECYCLE)
     assert s.retry() == []  # nothing failed: nothing to retry
-    assert s.on_search_failed("no plan") == []  # the same beliefs would fail again
+    # The same beliefs would fail again: it waits for them to change, and says so.
+    waits = s.on_search_failed("no plan")
+    assert kinds(waits) == ["wait"] and "planning failed (no plan)" in waits[0].reason
+    assert "when the beliefs change" in waits[0].reason
     retried = s.retry()
     assert kinds(retried) == ["start_search"] and "no plan" in retried[0].reason
     assert s.retry() == []  # once
-    assert s.on_search_failed("no plan") == []
+    assert kinds(s.on_search_failed("no plan")) == ["wait"]
     out = s.on_search_failed("no plan")
     assert kinds(out) == ["cancel_search", "drop"] and "planning failed 3 times" in out[-1].reason
 
@@ -157,7 +160,7 @@ def test_a_blocked_goal_is_waited_out_not_dropped() -> None:
     # Unsolvable failures still count and drop.
     s2 = IntentionScheduler(plan_retries=1)
     s2.choose(RECYCLE)
-    assert s2.on_search_failed("no plan") == []
+    assert kinds(s2.on_search_failed("no plan")) == ["wait"]
     assert kinds(s2.on_search_failed("no plan"))[-1] == "drop"
 
 
@@ -200,5 +203,5 @@ def test_a_restarted_executor_has_the_intention_planned_again_and_its_failure_wa
     assert kinds(s.on_search_failed("the goal can never hold", now=3.0)) == ["wait"]
     assert s.current.plan_failures == 0 and s.current.waiting
     assert kinds(s.retry(4.0)) == ["start_search"]
-    assert s.on_search_failed("no plan", now=5.0) == []  # the next one counts
+    assert kinds(s.on_search_failed("no plan", now=5.0)) == ["wait"]  # the next one counts
     assert s.current.plan_failures == 1

@@ -295,3 +295,58 @@ def test_a_rule_binds_the_precondition_of_the_desire_it_adds() -> None:
     assert [str(lit.belief) for lit in clause] == ["(in robot1 c_0_1)"]
     away = mind.on_percepts(percepts(1, position=(0, 2), free=((0, 1),)))
     assert ("make_way", "achieved") in [(e.desire, e.event) for e in away.events]
+
+
+def test_a_failed_replan_is_retried_when_a_sensor_or_an_outcome_changes_the_beliefs() -> None:
+    """Issue 31's stall: a step refused before sensing caught up, the replan from the
+    stale beliefs failed, and only the world's percepts could retry it. Any change of
+    the beliefs between cycles retries it now, and the wait says why meanwhile."""
+    from cbdi.wire.agent import AgentRequest
+    from cbdi_scheduler.requests import serve_request
+
+    mind = Mind(load_agent(AGENT, "robot1"))
+    mind.on_percepts(percepts(0, [("pla1", (1, 1))]))
+    step = PlanStep(
+        step_id="a", action="move", args=["robot1", "c_0_1", "c_1_1"], start=0, duration=1
+    )
+    mind.on_plan(PartialPlan(agent="robot1", plan_id="p1", baseline="", steps=[step]))
+    refused = ActionStatus(
+        agent="robot1",
+        plan_id="p1",
+        step_id="a",
+        action="move",
+        status="refused",
+        reason="at start condition (in robot1 c_0_1) does not hold",
+        time=1.0,
+    )
+    assert [c.kind for c in mind.on_status(refused).commands] == ["start_search"]
+    failed = mind.on_search_failed("no plan from the beliefs")
+    assert [(e.desire, e.event) for e in failed.events] == [("recycle", "waiting")]
+    assert "no plan from the beliefs" in failed.events[0].reason
+    same = [("pla1", (1, 1))]
+    assert [c.kind for c in mind.on_percepts(percepts(1, same)).commands] == []
+    # A sensor's reading, between two cycles the world's percepts do not change.
+    sensed = AgentRequest(
+        from_agent="sensor", group="sensors", op="del_belief", belief="(map_loaded)"
+    )
+    assert serve_request(mind, sensed).accepted
+    retried = mind.on_percepts(percepts(2, same)).commands
+    assert [c.kind for c in retried] == ["start_search"]
+    assert "no plan from the beliefs" in retried[0].reason
+    # An outcome's change counts the same way.
+    mind.on_search_failed("no plan from the beliefs")
+    assert [c.kind for c in mind.on_percepts(percepts(3, same)).commands] == []
+    recycled = ActionOutcome(
+        agent="robot1",
+        request_id="r1",
+        action="recycle",
+        status="succeeded",
+        reason="",
+        epoch=3,
+        time=3.5,
+        item="pla2",  # what no percept shows: only the outcome tells
+    )
+    assert mind.on_outcome(recycled).beliefs_changed
+    retried = mind.on_percepts(percepts(4, same)).commands
+    assert [c.kind for c in retried] == ["start_search"]
+    assert [c.kind for c in mind.on_percepts(percepts(5, same)).commands] == []  # once

@@ -19,6 +19,7 @@ from cbdi.errors import CbdiError
 __all__ = [
     "MODES",
     "AgentFileError",
+    "ExecutionSettings",
     "PlanningSettings",
     "RawAgentFile",
     "domain_signature",
@@ -63,6 +64,26 @@ class PlanningSettings:
 
 
 @dataclass(frozen=True)
+class ExecutionSettings:
+    """How the agent's executor starts steps (`[execution]`).
+
+    `condition_wait`: simulated seconds a due step waits for its at-start and over-all
+    conditions to hold (sensing catching up with what an action did) before it is
+    refused; `condition_wait_for`: the same per action name.
+    """
+
+    condition_wait: float = 0.0
+    condition_wait_for: tuple[tuple[str, float], ...] = ()
+
+    def executor_args(self) -> list[str]:
+        """The `cbdi-executor` flags that set these."""
+        args = ["--condition-wait", repr(self.condition_wait)] if self.condition_wait else []
+        for action, seconds in self.condition_wait_for:
+            args += ["--condition-wait-for", f"{action}={seconds!r}"]
+        return args
+
+
+@dataclass(frozen=True)
 class RawAgentFile:
     """The TOML of an agent file, its source, and the resolved, existing domain file."""
 
@@ -76,6 +97,7 @@ class RawAgentFile:
     # The domain's actions that performers carry out (code on the robot or beside it,
     # `cbdi.performer`) rather than the world: the executor sends them to the performer.
     performers: tuple[str, ...] = ()
+    execution: ExecutionSettings = ExecutionSettings()
 
 
 def read_agent_file(path: str | Path, agent: str) -> RawAgentFile:
@@ -104,7 +126,44 @@ def parse_agent_text(text: str, source: str, base: Path) -> RawAgentFile:
         raise AgentFileError(source, "domain", f"no such file {path}")
     planning = _planning(data.get("planning", {}), source)
     transient = _transient(data, source, path)
-    return RawAgentFile(data, source, path, planning, transient, _performers(data, source, path))
+    performers = _performers(data, source, path)
+    execution = _execution(data.get("execution", {}), source, path)
+    return RawAgentFile(data, source, path, planning, transient, performers, execution)
+
+
+def _seconds(value: Any, source: str, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise AgentFileError(source, where, f"expected seconds, got {type(value).__name__}")
+    if not (math.isfinite(value) and value >= 0):
+        raise AgentFileError(source, where, "expected a finite number of seconds >= 0")
+    return float(value)
+
+
+def _execution(table: Any, source: str, domain: Path) -> ExecutionSettings:
+    """Read `[execution]`: `condition_wait` and `condition_wait_for = { ACTION = s }`."""
+    if not isinstance(table, dict):
+        raise AgentFileError(source, "execution", "expected a table")
+    known = ("condition_wait", "condition_wait_for")
+    for key in table:
+        if key not in known:
+            raise AgentFileError(
+                source, f"execution.{key}", f"unknown setting (known: {', '.join(known)})"
+            )
+    wait = _seconds(table.get("condition_wait", 0.0), source, "execution.condition_wait")
+    per = table.get("condition_wait_for", {})
+    if not isinstance(per, dict):
+        raise AgentFileError(source, "execution.condition_wait_for", "expected a table")
+    declared = domain_actions(_domain_text(domain, source)) if per else {}
+    out = []
+    for action, value in per.items():
+        where = f"execution.condition_wait_for.{action}"
+        if action.lower() not in declared:
+            known_actions = ", ".join(sorted(declared)) or "none"
+            raise AgentFileError(
+                source, where, f"the domain has no action {action!r} (it has: {known_actions})"
+            )
+        out.append((action.lower(), _seconds(value, source, where)))
+    return ExecutionSettings(wait, tuple(out))
 
 
 def _performers(data: dict[str, Any], source: str, domain: Path) -> tuple[str, ...]:

@@ -7,6 +7,7 @@ entry-point group).
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Sequence
 
@@ -14,7 +15,7 @@ from cbdi import keys
 from cbdi.errors import CbdiError
 from cbdi.runtime import load_config, run_service
 from cbdi.runtime.together import TogetherService
-from cbdi_executor.service import ExecutorSettings, executor_main
+from cbdi_executor.service import ExecutorSettings, condition_waits, executor_main
 
 __all__ = ["main", "shell"]
 
@@ -34,6 +35,10 @@ def shell(argv: Sequence[str] | None = None) -> TogetherService:
     keys.validate_name(settings.agent)
     for action in settings.performer:
         keys.validate_name(action, "performer action")
+    if not (math.isfinite(settings.condition_wait) and settings.condition_wait >= 0):
+        raise ValueError(f"condition_wait {settings.condition_wait}: expected seconds >= 0")
+    for action in condition_waits(settings.condition_wait_for):
+        keys.validate_name(action, "condition_wait_for action")
     service = keys.service_id("executor", settings.agent)
     return TogetherService(service, settings, executor_main(settings))
 

@@ -1,15 +1,20 @@
 """The time-triggered dispatcher: the executor's pure core.
 
 Steps start at their scheduled time, one action at a time (the world runs one action per
-robot), each only if its at-start conditions hold in the current beliefs; a step whose
-conditions fail is refused, a step the world rejects or fails ends the plan (the rest is
-cancelled) so that a repaired plan can take over. A plan with a new baseline replaces the
-queue after the step it applies after. An early arrest after step A lets what already
-started finish, starts nothing after A, and reports the state once nothing runs.
+robot), each only once its at-start and over-all conditions hold in the current beliefs.
+A step whose conditions fail waits for them (sensing catching up with an outcome) up to
+its action's `condition_wait` simulated seconds, reported `waiting` with what it waits
+for, and starts as soon as they hold: the rest of the plan shifts by the wait. After the
+bound (at once with none) it is refused with the reason. A step the world rejects or
+fails ends the plan (the rest is cancelled) so that a repaired plan can take over. A
+plan with a new baseline replaces the queue after the step it applies after. An early
+arrest after step A lets what already started finish, starts nothing after A, and
+reports the state once nothing runs.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from cbdi.beliefs import BeliefSet
@@ -32,6 +37,7 @@ class StepState:
     reason: str = ""
     request_id: str = ""
     ends_at: float = float("inf")  # when the world said it ends (once accepted)
+    blocked_since: float | None = None  # due, its conditions failing since then
 
 
 @dataclass
@@ -46,8 +52,17 @@ class Effects:
 class Dispatcher:
     """Dispatch one agent's plan steps in time."""
 
-    def __init__(self, agent: str) -> None:
+    def __init__(
+        self,
+        agent: str,
+        condition_wait: float = 0.0,
+        condition_wait_for: Mapping[str, float] | None = None,
+    ) -> None:
+        """`condition_wait`: simulated seconds a due step waits for its conditions before
+        it is refused; `condition_wait_for`: the same per action name, overriding it."""
         self.agent = agent
+        self.condition_wait = condition_wait
+        self.condition_wait_for = {k.lower(): v for k, v in (condition_wait_for or {}).items()}
         self.plan_id = ""
         self.steps: list[StepState] = []
         self.arrest: tuple[str, str] | None = None  # (plan id, last step allowed to start)
@@ -161,9 +176,19 @@ class Dispatcher:
             broken, when = first_failing(state.step.over_all, beliefs), "over all"
         if broken is not None:
             reason = f"{when} condition {describe(broken)} does not hold"
+            since = now if state.blocked_since is None else state.blocked_since
+            state.blocked_since = since
+            bound = self.condition_wait_for.get(state.step.action.lower(), self.condition_wait)
+            if now - since < bound - EPS:
+                if state.reason != reason:  # said once per condition waited for
+                    self._set(state, "waiting", reason, now, out)
+                return
+            if bound > 0:
+                reason += f" after waiting {now - since:g} s"
             self._set(state, "refused", reason, now, out)
             self._abandon(now, out)
             return
+        state.reason = ""  # what it waited for holds now
         self._requests += 1
         step = state.step
         request = ActionRequest(

@@ -11,7 +11,8 @@ nothing waits), so a lockstep world never runs ahead of the agent.
 from __future__ import annotations
 
 import itertools
-from collections.abc import AsyncIterator
+import math
+from collections.abc import AsyncIterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from cbdi import keys
@@ -44,7 +45,7 @@ from cbdi.wire.world import (
 )
 from cbdi_executor.dispatcher import Dispatcher, Effects
 
-__all__ = ["ExecutorService", "ExecutorSettings", "executor_main"]
+__all__ = ["ExecutorService", "ExecutorSettings", "condition_waits", "executor_main"]
 
 INPUTS: tuple[type[Message], ...] = (
     Tick,
@@ -74,6 +75,17 @@ class ExecutorSettings(ServiceSettings):
         default=15.0,
         metadata={"help": "wall s to ask a world that does not answer again (it restarts)"},
     )
+    condition_wait: float = field(
+        default=0.0,
+        metadata={
+            "help": "simulated s a due step waits for its conditions (sensing catching up) "
+            "before it is refused (the agent file's [execution] condition_wait)"
+        },
+    )
+    condition_wait_for: tuple[str, ...] = field(
+        default=(),
+        metadata={"help": "ACTION=SECONDS: condition_wait for one action"},
+    )
 
 
 class ExecutorService:
@@ -86,11 +98,13 @@ class ExecutorService:
         ack_timeout: float = 120.0,
         performers: tuple[str, ...] = (),
         world_wait: float = 15.0,
+        condition_wait: float = 0.0,
+        condition_wait_for: Mapping[str, float] | None = None,
     ) -> None:
         self.ctx, self.agent = ctx, agent
         self.world_wait = world_wait
         self.performers = frozenset(a.lower() for a in performers)
-        self.dispatcher = Dispatcher(agent)
+        self.dispatcher = Dispatcher(agent, condition_wait, condition_wait_for)
         self.clock = SimClock()
         self.beliefs = BeliefSet()
         self.beliefs_epoch = -1
@@ -274,12 +288,35 @@ class ExecutorService:
         raise AssertionError("unreachable")
 
 
+def condition_waits(pairs: Sequence[str]) -> dict[str, float]:
+    """Parse `ACTION=SECONDS` pairs; ValueError naming the bad one."""
+    out: dict[str, float] = {}
+    for pair in pairs:
+        action, sep, text = pair.partition("=")
+        try:
+            seconds = float(text) if sep else math.nan
+        except ValueError:
+            seconds = math.nan
+        if not action or not (math.isfinite(seconds) and seconds >= 0):
+            raise ValueError(
+                f"condition_wait_for {pair!r}: expected ACTION=SECONDS, seconds finite and >= 0"
+            )
+        out[action.lower()] = seconds
+    return out
+
+
 def executor_main(settings: ExecutorSettings) -> ServiceMain:
     """Return the service body of one executor."""
 
     async def body(ctx: ServiceContext) -> None:
         service = ExecutorService(
-            ctx, settings.agent, settings.ack_timeout, settings.performer, settings.world_wait
+            ctx,
+            settings.agent,
+            settings.ack_timeout,
+            settings.performer,
+            settings.world_wait,
+            settings.condition_wait,
+            condition_waits(settings.condition_wait_for),
         )
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         ctx.start(service.run(stream), name="executor")

@@ -16,7 +16,9 @@ cancel a search, pass a plan to the executor, ask for an early arrest, drop a de
 - Planning and execution failures are retried up to their limits, then the desire is
   dropped with the reason. A search that failed only because something that moves is in
   the way (`blocked`: a person on the goal cell) is not a failure: the intention waits
-  and searches again whenever the beliefs change, until its desire's deadline. A wait
+  and searches again whenever the beliefs change, until its desire's deadline. Any
+  failed search waits for the beliefs to change, from whatever source (percepts,
+  outcomes, sensors, an operator), and says so (a `wait` command). A wait
   in which nothing changes for `wait_stall` seconds (a person waiting for the robot that
   waits for it) counts as a failure and searches again, so a deadlock ends in a drop.
 """
@@ -197,7 +199,13 @@ class IntentionScheduler:
             cur.waiting, cur.quiet_since = True, now
             return [Command("wait", cur.desire, reason=reason)]
         cur.waiting = False
-        return self._failed_planning(reason)
+        dropped = self._failed_planning(reason)
+        if dropped:
+            return dropped
+        # Said once per failure, so a desire never waits in silence: the log, the
+        # desire's events and `cbdi ctl show` tell what failed and what retries it.
+        why = f"planning failed ({reason}); searching again when the beliefs change"
+        return [Command("wait", cur.desire, reason=why)]
 
     def _failed_planning(self, reason: str) -> list[Command]:
         cur = self.current

@@ -54,6 +54,9 @@ class Mind:
         self.stop_asked: bool | None = None  # a safe stop (True) or a resume (False) asked
         self.halted_at = 0.0  # when the safe stop began: deadlines wait meanwhile
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
+        # The beliefs changed between cycles (an outcome, a sensor, an operator): the next
+        # cycle counts it as a change, so a failed search waiting for one is retried.
+        self.changed = False
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -71,6 +74,7 @@ class Mind:
         before = self.beliefs
         self.beliefs = self.knowledge.on_percepts(self.beliefs, p)
         out = Reaction(beliefs_changed=self.beliefs != before)
+        changed, self.changed = self.changed or out.beliefs_changed, False
         out.events += self.requested
         self.requested = []
         if out.beliefs_changed or self.epoch == 0 or self.refire:
@@ -81,7 +85,7 @@ class Mind:
         self._coordinate(out)
         self._stop_or_resume(out)
         self._deliberate(out)
-        if out.beliefs_changed:
+        if changed:
             out.commands += self.intentions.retry(self.now)
         else:
             stalled = self._with_drops(self.intentions.stalled(self.now))
@@ -126,8 +130,10 @@ class Mind:
 
     def request_beliefs(self, add: list[Belief], remove: list[Belief]) -> None:
         """Believe `add` and stop believing `remove` (a request); the rules fire again."""
+        before = self.beliefs
         self.beliefs = self.beliefs.removing(remove).adding(add)
         self.refire = True
+        self.changed = self.changed or self.beliefs != before
 
     def _believe_stalled(self) -> None:
         """Believe `(stalled DESIRE)` while the intention's blocked wait is stalled, so a
@@ -207,7 +213,9 @@ class Mind:
             return Reaction()
         before = self.beliefs
         self.beliefs = self.knowledge.on_outcome(self.beliefs, outcome)
-        return Reaction(beliefs_changed=self.beliefs != before)
+        changed = self.beliefs != before
+        self.changed = self.changed or changed
+        return Reaction(beliefs_changed=changed)
 
     # -- planner and executor ------------------------------------------------------------
     def on_plan(self, plan: PartialPlan) -> Reaction:

@@ -99,6 +99,7 @@ def agent_state(mind: Mind, log: PlanLog, beliefs: bool = True) -> AgentState:
             steps=steps,
             waiting=cur.waiting,
             stopping=mind.intentions.stopping,
+            retry=mind.intentions.retry_reason,
         )
     return AgentState(
         agent=mind.agent,

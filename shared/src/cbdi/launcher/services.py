@@ -105,8 +105,10 @@ def _agent_plan(
             args += ["--planning-speed", str(run.planning_speed)]
         if component == "executor":
             assert agent.agent_file is not None
-            for action in read_agent_file(agent.agent_file, agent.name).performers:
+            raw = read_agent_file(agent.agent_file, agent.name)
+            for action in raw.performers:
                 args += ["--performer", action]
+            args += raw.execution.executor_args()
         return ServicePlan(service, *_BDI_SCRIPTS[component], tuple(args))
     if agent.kind == "scripted":  # a domain's scripted robot (it asks the world its map)
         return ServicePlan(service, "cbdi", "cbdi.cli", ("scripted-agent", "--agent", agent.name))
