@@ -15,10 +15,21 @@ PYTEST_PARALLEL = -n $(PYTEST_WORKERS) --dist loadfile
 
 venv: $(STAMP)
 
-$(STAMP): requirements.lock requirements-dev.lock $(foreach p,$(PACKAGES),$(p)/pyproject.toml)
+# The planner's compiled search core (Rust, PyO3) is built by maturin with cargo, its
+# crates pinned by services/planner/core/Cargo.lock (services/planner/README.md).
+CORE   := services/planner/core
+CARGO  ?= $(or $(shell command -v cargo 2>/dev/null),$(wildcard $(HOME)/.cargo/bin/cargo))
+
+$(STAMP): requirements.lock requirements-dev.lock $(foreach p,$(PACKAGES),$(p)/pyproject.toml) \
+          $(CORE)/pyproject.toml $(CORE)/Cargo.toml $(CORE)/Cargo.lock $(wildcard $(CORE)/src/*.rs)
+	@test -n "$(CARGO)" || { echo "error: the planner's compiled core needs Rust's cargo" \
+	  "(1.80 or later) to build: install Rust with https://rustup.rs or your system's package" \
+	  "(Debian: apt-get install cargo), then run make again" >&2; exit 1; }
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --disable-pip-version-check -r requirements.lock -r requirements-dev.lock
 	$(BIN)/python -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation $(foreach p,$(PACKAGES),-e $(p))
+	PATH="$(abspath $(BIN)):$(dir $(CARGO)):$$PATH" MATURIN_PEP517_ARGS="--locked" \
+	  $(BIN)/python -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation ./$(CORE)
 	touch $(STAMP)
 
 # Debian packages the tests use, installed when missing: docker-compose (Compose v1)

@@ -97,6 +97,14 @@ def image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     built = _run(["sh", "tools/image.sh"], clone, 900, CBDI_ENGINE="podman", CBDI_IMAGE=tag)
     assert built.returncode == 0, built.stderr[-3000:]
     print(f"image built in {time.monotonic() - started:.0f} s")
+    # The planners in the image search with the compiled core (issue 29).
+    core = _run(
+        [PODMAN or "podman", "run", "--rm", "--ulimit", "nofile=4096:4096",
+         "--ulimit", "nproc=4096:4096", tag, "python", "-c",
+         "import cbdi_planner.core as c; print(c.compiled().__name__)"],
+        root, 120,
+    )  # fmt: skip
+    assert core.stdout.strip() == "cbdi_planner_core", core.stderr[-2000:]
     try:
         yield tag
     finally:

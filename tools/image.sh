@@ -9,7 +9,8 @@
 #    The root file system is kept as a tarball in CBDI_IMAGE_CACHE (default
 #    ~/.cache/cbdi), so a lost base is imported again in seconds. A base from a registry
 #    works too: CBDI_BASE_IMAGE=python:3.11-slim tools/image.sh.
-# 2. The image (CBDI_IMAGE, default localhost/cbdi:latest) from the Dockerfile on that base.
+# 2. The planner's compiled core (Rust), built with the host's cargo (services/planner/core).
+# 3. The image (CBDI_IMAGE, default localhost/cbdi:latest) from the Dockerfile on that base.
 #    When the host has them, its CA bundle (PIP_CERT, REQUESTS_CA_BUNDLE, SSL_CERT_FILE or
 #    /etc/ssl/certs/ca-certificates.crt), its pip configuration (PIP_CONFIG_FILE,
 #    /etc/pip.conf, ~/.config/pip/pip.conf, ~/.pip/pip.conf) and PIP_INDEX_URL,
@@ -102,7 +103,19 @@ stage() {
   done
 }
 
-unstage() { rm -f "$STAGE/ca.crt" "$STAGE/pip.conf" "$STAGE/pip.env"; }
+core() {
+  # The planner's compiled core, built here with the host's cargo (the base has no Rust),
+  # its crates pinned by Cargo.lock, into a cache kept between builds; the build stage
+  # puts it in the image's venv. An abi3 module: any Python 3.11 of the same libc loads it.
+  cargo=$(command -v cargo 2>/dev/null || ls "$HOME/.cargo/bin/cargo" 2>/dev/null || true)
+  [ -n "$cargo" ] || die "the planner's compiled core needs Rust's cargo: install Rust (https://rustup.rs)"
+  say "compiled core: cargo build (cached in $CACHE/cargo-target)"
+  "$cargo" build -q --release --locked --manifest-path "$REPO/services/planner/core/Cargo.toml" \
+    --target-dir "$CACHE/cargo-target" || die "the compiled core did not build"
+  cp "$CACHE/cargo-target/release/libcbdi_planner_core.so" "$STAGE/cbdi_planner_core.abi3.so"
+}
+
+unstage() { rm -f "$STAGE/ca.crt" "$STAGE/pip.conf" "$STAGE/pip.env" "$STAGE/cbdi_planner_core.abi3.so"; }
 
 main() {
   e=$(engine)
@@ -110,6 +123,7 @@ main() {
   base "$e"
   stage
   trap unstage EXIT
+  core
   start=$(date +%s)
   "$e" build --build-arg "BASE_IMAGE=$BASE" -t "$IMAGE" -f "$REPO/Dockerfile" "$REPO"
   unstage

@@ -10,9 +10,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+from cbdi_planner.core import compiled
 from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
 from cbdi_planner.state import State, apply_end, apply_start, apply_til, is_goal
-from cbdi_planner.stn import END, INST, START, TIL, Future, Step, Timeline
+from cbdi_planner.stn import END, INST, START, TIL, Future, Oracle, Step, Timeline
 from cbdi_planner.task import Snap, Task
 
 __all__ = ["Expander", "Move", "Node", "Successor"]
@@ -67,11 +68,15 @@ class Expander:
         task: Task,
         epsilon: float,
         compress: bool = False,
+        core: str | None = None,
     ) -> None:
+        """`core`: the search core (`cbdi_planner.core`; default: the environment's)."""
         self.task = task
         self.epsilon = epsilon
         self.compress = compress
-        self.rpg = RelaxedPlanGraph(task, compress=compress)
+        self.rpg = RelaxedPlanGraph(task, compress=compress, core=core)
+        module = compiled(core)
+        self._oracle = Oracle(module) if module is not None else None
         self.subgoal: int | None = None
         self.generated = 0
         self.evaluated = 0
@@ -94,7 +99,7 @@ class Expander:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
         if state.open:
             raise ValueError("a search root cannot have running actions")
-        return self.evaluate(state, Timeline(epsilon=self.epsilon), ())
+        return self.evaluate(state, Timeline(epsilon=self.epsilon, oracle=self._oracle), ())
 
     def aim(self, subgoal: int | None) -> None:
         """Search for the facts `subgoal` only (a stage of a goal agenda); None: the goal."""

@@ -14,9 +14,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from cbdi_planner.core import compiled
 from cbdi_planner.state import State
 from cbdi_planner.stn import END, INST, START, TIL
 from cbdi_planner.task import NExpr, NumAssign, NumCond, Task
+from cbdi_planner.task import bit_positions as _bits
 
 __all__ = ["INFINITE", "Estimate", "RelaxedPlanGraph"]
 
@@ -45,21 +47,6 @@ class _Op:
     add: tuple[int, ...]
     num_pre: tuple[NumCond, ...]
     num_eff: tuple[NumAssign, ...]
-
-
-def _bits(mask: int) -> tuple[int, ...]:
-    """Return the positions of the set bits of `mask`, lowest first.
-
-    Scanning the binary text is linear in the width; peeling off the lowest bit of a
-    wide int costs a copy of the int per bit (a state of a 30x30 map has 650 of them).
-    """
-    text = bin(mask)[:1:-1]
-    out = []
-    i = text.find("1")
-    while i >= 0:
-        out.append(i)
-        i = text.find("1", i + 1)
-    return tuple(out)
 
 
 def _interval(expr: NExpr, lo: list[float], hi: list[float]) -> tuple[float, float]:
@@ -112,13 +99,15 @@ def _widen(effect: NumAssign, lo: list[float], hi: list[float]) -> bool:
 class RelaxedPlanGraph:
     """Precomputed relaxed operators of a task; `estimate` evaluates one state."""
 
-    def __init__(self, task: Task, compress: bool = False) -> None:
+    def __init__(self, task: Task, compress: bool = False, core: str | None = None) -> None:
         """Build the relaxed operators; `compress`: one per action, for compressed search.
 
         A compressed search has no running actions, so a durative action can be one
         relaxed operator (FF's on the compressed task): it needs what its start needs
         and what its invariant and end need beyond the start's effects, and adds what
         both add. The relaxed plan then counts it once, and the graph is half as deep.
+        `core`: the search core that explores (`cbdi_planner.core`; default: the
+        environment's).
         """
         self.task = task
         n_facts, n_actions = len(task.facts), len(task.actions)
@@ -187,6 +176,8 @@ class RelaxedPlanGraph:
         for i, til in enumerate(task.tils):
             self.ops.append(_Op(TIL, i, (), _bits(til.add), (), ()))
         self._index(then)
+        module = compiled(core)
+        self._core = module.Graph(self) if module is not None else None
 
     def _index(self, then: dict[int, int]) -> None:
         """Flatten the operators into parallel lists for the inner loops of `estimate`."""
@@ -286,7 +277,12 @@ class RelaxedPlanGraph:
         Precondition counters make each layer cost only the operators its new facts
         touch; an operator whose numeric condition cannot hold yet waits. Ops fire in
         the order they became ready, so the first achiever of a fact is always the same.
+        The compiled core, when it runs, does exactly this (without the interpreter lock).
         """
+        if self._core is not None:
+            facts = state.facts
+            packed = facts.to_bytes((facts.bit_length() + 7) // 8, "little")
+            return self._core.explore(packed, state.open, state.til, state.nums, goals)  # type: ignore[no-any-return]
         level = [-1] * self.size
         achiever = [-1] * self.size
         op_level = [-1] * len(self.ops)

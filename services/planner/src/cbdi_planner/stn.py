@@ -18,11 +18,13 @@ it interferes with must come before its fixed time).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from types import ModuleType
 
-from cbdi_planner.task import Snap
+from cbdi_planner.task import Snap, bit_positions
 
-__all__ = ["END", "INST", "START", "TIL", "Future", "Step", "Timeline"]
+__all__ = ["END", "INST", "START", "TIL", "Future", "Oracle", "Step", "Timeline"]
 
 START, END, INST, TIL = 0, 1, 2, 3
 _TOL = 1e-9
@@ -77,15 +79,47 @@ def _interfering(steps: tuple[Step, ...], b: Snap) -> list[int]:
     return out
 
 
+class Oracle:
+    """Which happenings interfere, answered by the compiled core (`cbdi_planner.core`).
+
+    Each snap gets a code the first time it is asked about (by its identity: the task's
+    snaps live as long as the search); a timeline keeps its steps' codes beside them.
+    """
+
+    def __init__(self, core: ModuleType) -> None:
+        self._core = core.Interference()
+        self._codes: dict[int, int] = {}
+        self._snaps: list[Snap] = []  # kept alive, so that no other snap takes an id
+
+    def code(self, snap: Snap) -> int:
+        """Return the code of `snap`, given it now if it has none."""
+        found = self._codes.get(id(snap))
+        if found is None:
+            masks = (snap.reads, snap.writes, snap.add, snap.dele, snap.num_reads, snap.num_writes)
+            found = int(self._core.add(*(bit_positions(m) for m in masks)))
+            self._codes[id(snap)] = found
+            self._snaps.append(snap)
+        return found
+
+    def interfering(self, codes: tuple[int, ...], snap: Snap) -> list[int]:
+        """`_interfering` over the steps of `codes`."""
+        return self._core.interfering(codes, self.code(snap))  # type: ignore[no-any-return]
+
+
 @dataclass(frozen=True, slots=True)
 class Timeline:
-    """Steps, their incoming ordering edges and their earliest consistent times."""
+    """Steps, their incoming ordering edges and their earliest consistent times.
+
+    With an `oracle` (the compiled core), `codes` holds each step's snap code.
+    """
 
     steps: tuple[Step, ...] = ()
     edges: tuple[tuple[tuple[int, float], ...], ...] = ()
     times: tuple[float, ...] = ()
     epsilon: float = 0.001
     span: float = 0.0
+    oracle: Oracle | None = field(default=None, compare=False)
+    codes: tuple[int, ...] = field(default=(), compare=False)
 
     @property
     def makespan(self) -> float:
@@ -98,8 +132,13 @@ class Timeline:
         `future` lists the happenings still to come after `step` (the ends of the
         actions running after it, the timed literals not yet happened).
         """
-        eps = self.epsilon
-        incoming = [(i, eps) for i in _interfering(self.steps, step.snap)]
+        eps, oracle = self.epsilon, self.oracle
+        if oracle is not None:
+            codes = (*self.codes, oracle.code(step.snap))
+            incoming = [(i, eps) for i in oracle.interfering(self.codes, step.snap)]
+        else:
+            codes = ()
+            incoming = [(i, eps) for i in _interfering(self.steps, step.snap)]
         if step.kind == END:
             incoming.append((step.partner, step.low))
         edges = (*self.edges, tuple(incoming))
@@ -107,13 +146,14 @@ class Timeline:
         times = [*self.times, 0.0]
         n = len(steps) - 1
         times[n] = self._base(step, incoming, times)
-        waits = _waits(steps, future) if future is not None else ()
+        find = _finder(steps, oracle, codes)
+        waits = _waits(steps, future, find) if future is not None else ()
         if not _settle(steps, edges, times, n, waits, eps):
             return None
-        if future is not None and not _before_deadlines(steps, times, future, eps):
+        if future is not None and not _before_deadlines(times, future, eps, find):
             return None
         span = max((t for t, s in zip(times, steps, strict=True) if s.kind != TIL), default=0.0)
-        return Timeline(steps, edges, tuple(times), eps, span)
+        return Timeline(steps, edges, tuple(times), eps, span, oracle, codes)
 
     @staticmethod
     def _base(step: Step, incoming: list[tuple[int, float]], times: list[float]) -> float:
@@ -140,27 +180,37 @@ class Future:
 _Wait = tuple[int, float, tuple[int, ...]]
 
 
-def _waits(steps: tuple[Step, ...], future: Future) -> tuple[_Wait, ...]:
+def _finder(
+    steps: tuple[Step, ...], oracle: Oracle | None, codes: tuple[int, ...]
+) -> Callable[[Snap], list[int]]:
+    """Return what finds the steps a snap interferes with (the oracle's, or Python's)."""
+    if oracle is not None:
+        return lambda snap: oracle.interfering(codes, snap)
+    return lambda snap: _interfering(steps, snap)
+
+
+def _waits(
+    steps: tuple[Step, ...], future: Future, find: Callable[[Snap], list[int]]
+) -> tuple[_Wait, ...]:
     """Return, for each running action, the steps its future end must follow."""
     out = []
     for start, end_snap in future.ends:
         high = steps[start].high
         if high == math.inf:
             continue
-        after = tuple(k for k in _interfering(steps, end_snap) if k != start)
+        after = tuple(k for k in find(end_snap) if k != start)
         if after:
             out.append((start, high, after))
     return tuple(out)
 
 
 def _before_deadlines(
-    steps: tuple[Step, ...], times: list[float], future: Future, eps: float
+    times: list[float], future: Future, eps: float, find: Callable[[Snap], list[int]]
 ) -> bool:
     """Tell whether every step a future timed literal interferes with can precede it."""
     for when, snap in future.deadlines:
-        for k, old in enumerate(steps):
-            if times[k] + eps > when + _TOL and interferes(old.snap, snap):
-                return False
+        if any(times[k] + eps > when + _TOL for k in find(snap)):
+            return False
     return True
 
 

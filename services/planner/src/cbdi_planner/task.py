@@ -21,6 +21,7 @@ __all__ = [
     "Snap",
     "Task",
     "TimedLiterals",
+    "bit_positions",
     "eval_expr",
     "expr_vars",
     "holds",
@@ -31,6 +32,21 @@ INTERNAL = "#"
 
 # A compiled numeric expression: ("c", value) | ("v", var) | (op, lhs, rhs).
 NExpr = tuple[Any, ...]
+
+
+def bit_positions(mask: int) -> tuple[int, ...]:
+    """Return the positions of the set bits of `mask`, lowest first.
+
+    Scanning the binary text is linear in the width; peeling off the lowest bit of a
+    wide int costs a copy of the int per bit (a state of a 30x30 map has 650 of them).
+    """
+    text = bin(mask)[:1:-1]
+    out = []
+    i = text.find("1")
+    while i >= 0:
+        out.append(i)
+        i = text.find("1", i + 1)
+    return tuple(out)
 
 
 def eval_expr(expr: NExpr, nums: tuple[float, ...]) -> float:
