@@ -162,7 +162,10 @@ def test_timelines_are_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
             children = list(ex.successors(node))
             if not children:
                 break
-            seen += [(t.times, t.edges, t.span) for _, t, _ in children]
+            seen += [
+                (tuple(t.times), [tuple(map(tuple, e)) for e in t.edges], t.span)
+                for _, t, _ in children
+            ]
             state, timeline, running = children[-1]
             node = ex.evaluate(state, timeline, running)
         schedules.append(seen)

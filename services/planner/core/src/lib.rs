@@ -5,7 +5,9 @@
 //! operations, so that a search gives the same states, expansions and plans with either
 //! (`tests/planner/test_compiled_core.py` checks it). What is here so far: the layered
 //! exploration of the temporal relaxed planning graph (`RelaxedPlanGraph._explore`),
-//! the hottest part of a search (about 60% of its time on a 30x30 map).
+//! the hottest part of a search (about 60% of its time on a 30x30 map), and the simple
+//! temporal network of a partial plan (`cbdi_planner.stn.Timeline`): which earlier steps
+//! a new one must follow, and the earliest consistent times.
 //!
 //! A call runs without the interpreter lock: a service's event loop keeps going while
 //! its planner explores.
@@ -204,7 +206,11 @@ fn cond_of(obj: &Bound<'_, PyAny>) -> PyResult<Cond> {
         ">=" => CmpOp::GreaterEq,
         _ => CmpOp::Equal,
     };
-    Ok(Cond { op, lhs: expr_of(&obj.getattr("lhs")?)?, rhs: expr_of(&obj.getattr("rhs")?)? })
+    Ok(Cond {
+        op,
+        lhs: expr_of(&obj.getattr("lhs")?)?,
+        rhs: expr_of(&obj.getattr("rhs")?)?,
+    })
 }
 
 fn assign_of(obj: &Bound<'_, PyAny>) -> PyResult<Assign> {
@@ -216,7 +222,11 @@ fn assign_of(obj: &Bound<'_, PyAny>) -> PyResult<Assign> {
         _ => AssignOp::Other,
     };
     let var: usize = obj.getattr("var")?.extract()?;
-    Ok(Assign { op, var, expr: expr_of(&obj.getattr("expr")?)? })
+    Ok(Assign {
+        op,
+        var,
+        expr: expr_of(&obj.getattr("expr")?)?,
+    })
 }
 
 #[pymethods]
@@ -234,16 +244,31 @@ impl Graph {
         let fire = fires
             .into_iter()
             .zip(op_add)
-            .map(|((numeric, then, live, quiet), all)| Fire { numeric, then, live, quiet, all })
+            .map(|((numeric, then, live, quiet), all)| Fire {
+                numeric,
+                then,
+                live,
+                quiet,
+                all,
+            })
             .collect();
         let mut num_pre = Vec::new();
         for conds in rpg.getattr("op_num_pre")?.try_iter()? {
-            num_pre.push(conds?.try_iter()?.map(|c| cond_of(&c?)).collect::<PyResult<Vec<_>>>()?);
+            num_pre.push(
+                conds?
+                    .try_iter()?
+                    .map(|c| cond_of(&c?))
+                    .collect::<PyResult<Vec<_>>>()?,
+            );
         }
         let mut num_eff = Vec::new();
         for effects in rpg.getattr("op_num_eff")?.try_iter()? {
-            num_eff
-                .push(effects?.try_iter()?.map(|e| assign_of(&e?)).collect::<PyResult<Vec<_>>>()?);
+            num_eff.push(
+                effects?
+                    .try_iter()?
+                    .map(|e| assign_of(&e?))
+                    .collect::<PyResult<Vec<_>>>()?,
+            );
         }
         let graph = Graph {
             size,
@@ -275,14 +300,19 @@ impl Graph {
         goals: Vec<usize>,
     ) -> PyResult<Option<Layers>> {
         if let Some(bad) = goals.iter().find(|&&g| g >= self.size) {
-            return Err(PyValueError::new_err(format!("goal {bad} is outside the graph")));
+            return Err(PyValueError::new_err(format!(
+                "goal {bad} is outside the graph"
+            )));
         }
         if let Some(bad) = open.iter().find(|&&a| self.pending + a >= self.size) {
-            return Err(PyValueError::new_err(format!("running action {bad} is unknown")));
+            return Err(PyValueError::new_err(format!(
+                "running action {bad} is unknown"
+            )));
         }
-        let outside = facts.iter().enumerate().any(|(i, &byte)| {
-            (0..8).any(|j| byte & (1 << j) != 0 && i * 8 + j >= self.size)
-        });
+        let outside = facts
+            .iter()
+            .enumerate()
+            .any(|(i, &byte)| (0..8).any(|j| byte & (1 << j) != 0 && i * 8 + j >= self.size));
         if outside {
             return Err(PyValueError::new_err("a fact is outside the graph"));
         }
@@ -404,8 +434,11 @@ impl Graph {
                 if fire.then >= 0 {
                     ready.push(fire.then as usize);
                 }
-                let (live, quiet): (&[usize], &[usize]) =
-                    if everything { (&fire.all, &[]) } else { (&fire.live, &fire.quiet) };
+                let (live, quiet): (&[usize], &[usize]) = if everything {
+                    (&fire.all, &[])
+                } else {
+                    (&fire.live, &fire.quiet)
+                };
                 for &f in live {
                     if level[f] < 0 {
                         level[f] = next_level;
@@ -445,9 +478,14 @@ impl Graph {
     ) -> HashMap<usize, Vec<usize>> {
         let mut extra: HashMap<usize, Vec<usize>> = HashMap::new();
         for a in open {
-            let Some(&k) = self.chained_end.get(a) else { continue };
-            let need: Vec<usize> =
-                self.op_pre[k].iter().copied().filter(|&f| level[f] < 0).collect();
+            let Some(&k) = self.chained_end.get(a) else {
+                continue;
+            };
+            let need: Vec<usize> = self.op_pre[k]
+                .iter()
+                .copied()
+                .filter(|&f| level[f] < 0)
+                .collect();
             counts[k] = need.len() as i64;
             if need.is_empty() {
                 ready.push(k);
@@ -511,7 +549,9 @@ fn sorted(mut bits: Vec<u32>) -> Vec<u32> {
 impl Interference {
     #[new]
     fn new() -> Self {
-        Interference { snaps: std::sync::RwLock::new(Vec::new()) }
+        Interference {
+            snaps: std::sync::RwLock::new(Vec::new()),
+        }
     }
 
     /// Add a happening by the bit positions of its masks; return its code.
@@ -543,20 +583,278 @@ impl Interference {
     /// interfere with happening `with` (`stn._interfering`).
     fn interfering(&self, py: Python<'_>, steps: Vec<usize>, with: usize) -> PyResult<Vec<usize>> {
         let snaps = self.snaps.read().expect("interference lock");
-        if let Some(bad) = steps.iter().chain(std::iter::once(&with)).find(|&&c| c >= snaps.len()) {
-            return Err(PyValueError::new_err(format!("no happening has code {bad}")));
+        if let Some(bad) = steps
+            .iter()
+            .chain(std::iter::once(&with))
+            .find(|&&c| c >= snaps.len())
+        {
+            return Err(PyValueError::new_err(format!(
+                "no happening has code {bad}"
+            )));
         }
         drop(snaps);
         Ok(py.detach(|| {
             let snaps = self.snaps.read().expect("interference lock");
-            let b = &snaps[with];
-            steps
-                .iter()
-                .enumerate()
-                .filter(|(_, &code)| interferes(&snaps[code], b))
-                .map(|(k, _)| k)
-                .collect()
+            interfering(&snaps, &steps, with)
         }))
+    }
+}
+
+/// The positions of the steps (by code) that interfere with happening `with`.
+fn interfering(snaps: &[Touches], steps: &[usize], with: usize) -> Vec<usize> {
+    let b = &snaps[with];
+    steps
+        .iter()
+        .enumerate()
+        .filter(|(_, &code)| interferes(&snaps[code], b))
+        .map(|(k, _)| k)
+        .collect()
+}
+
+const END: u8 = 1;
+const TIL: u8 = 3;
+const TOL: f64 = 1e-9;
+
+/// The simple temporal network of a partial plan (`cbdi_planner.stn.Timeline`'s
+/// numbers): each step's kind, partner, upper bound and snap code, its incoming
+/// ordering edges (flat: the edges of step k are `edge_off[k]..edge_off[k + 1]`) and
+/// the earliest consistent times. Extending copies it: a search keeps every node's.
+#[pyclass(frozen, module = "cbdi_planner_core")]
+#[derive(Clone, Default)]
+struct Schedule {
+    kinds: Vec<u8>,
+    partners: Vec<i64>,
+    highs: Vec<f64>,
+    codes: Vec<usize>,
+    edge_off: Vec<usize>,
+    edge_src: Vec<usize>,
+    edge_w: Vec<f64>,
+    times: Vec<f64>,
+    #[pyo3(get)]
+    span: f64,
+}
+
+/// The happenings certain to come after a step: `(start step, end snap code)` of each
+/// running action, `(time, snap code)` of each timed literal still to happen.
+type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
+
+/// A running action's future end: its start step, its bound, the steps it must follow.
+struct Wait {
+    start: usize,
+    high: f64,
+    after: Vec<usize>,
+}
+
+#[pymethods]
+impl Schedule {
+    #[new]
+    fn new() -> Self {
+        Schedule {
+            edge_off: vec![0],
+            ..Default::default()
+        }
+    }
+
+    /// The earliest time of each step.
+    #[getter]
+    fn times(&self) -> Vec<f64> {
+        self.times.clone()
+    }
+
+    /// Each step's incoming edges `(earlier step, least distance)`.
+    #[getter]
+    fn edges(&self) -> Vec<Vec<(usize, f64)>> {
+        (0..self.kinds.len())
+            .map(|k| {
+                (self.edge_off[k]..self.edge_off[k + 1])
+                    .map(|e| (self.edge_src[e], self.edge_w[e]))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// `Timeline.extend`: the schedule with a step appended (its kind, partner, bounds
+    /// and snap code), or None if inconsistent. `future` (None: not checked) holds the
+    /// happenings certain to come: `(start step, end snap code)` of each running action,
+    /// `(time, snap code)` of each timed literal still to happen.
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (oracle, kind, partner, low, high, code, future, epsilon))]
+    fn extend(
+        &self,
+        py: Python<'_>,
+        oracle: &Interference,
+        kind: u8,
+        partner: i64,
+        low: f64,
+        high: f64,
+        code: usize,
+        future: Option<Coming>,
+        epsilon: f64,
+    ) -> PyResult<Option<Schedule>> {
+        let n = self.kinds.len();
+        let known = oracle.snaps.read().expect("interference lock").len();
+        let ends_ok = future.as_ref().is_none_or(|(ends, deadlines)| {
+            ends.iter().all(|&(s, c)| s <= n && c < known)
+                && deadlines.iter().all(|&(_, c)| c < known)
+        });
+        let partner_ok = kind != END || (partner >= 0 && (partner as usize) < n);
+        if code >= known || !ends_ok || !partner_ok {
+            return Err(PyValueError::new_err(
+                "a step or happening is unknown to the schedule",
+            ));
+        }
+        Ok(py.detach(|| {
+            let snaps = oracle.snaps.read().expect("interference lock");
+            self.extended(
+                &snaps,
+                kind,
+                partner,
+                low,
+                high,
+                code,
+                future.as_ref(),
+                epsilon,
+            )
+        }))
+    }
+}
+
+impl Schedule {
+    #[allow(clippy::too_many_arguments)]
+    fn extended(
+        &self,
+        snaps: &[Touches],
+        kind: u8,
+        partner: i64,
+        low: f64,
+        high: f64,
+        code: usize,
+        future: Option<&Coming>,
+        eps: f64,
+    ) -> Option<Schedule> {
+        let mut out = self.clone();
+        let n = self.kinds.len();
+        let mut incoming: Vec<(usize, f64)> = interfering(snaps, &self.codes, code)
+            .into_iter()
+            .map(|i| (i, eps))
+            .collect();
+        if kind == END {
+            incoming.push((partner as usize, low));
+        }
+        out.kinds.push(kind);
+        out.partners.push(partner);
+        out.highs.push(high);
+        out.codes.push(code);
+        for &(i, w) in &incoming {
+            out.edge_src.push(i);
+            out.edge_w.push(w);
+        }
+        out.edge_off.push(out.edge_src.len());
+        // `Timeline._base`
+        let mut value = if kind == TIL { low } else { 0.0 };
+        for &(i, w) in &incoming {
+            if out.times[i] + w > value {
+                value = out.times[i] + w;
+            }
+        }
+        out.times.push(value);
+        let mut waits = Vec::new();
+        if let Some((ends, _)) = future {
+            for &(start, end_code) in ends {
+                let bound = out.highs[start];
+                if bound == f64::INFINITY {
+                    continue;
+                }
+                let after: Vec<usize> = interfering(snaps, &out.codes, end_code)
+                    .into_iter()
+                    .filter(|&k| k != start)
+                    .collect();
+                if !after.is_empty() {
+                    waits.push(Wait {
+                        start,
+                        high: bound,
+                        after,
+                    });
+                }
+            }
+        }
+        if !out.settle(n, &waits, eps) {
+            return None;
+        }
+        if let Some((_, deadlines)) = future {
+            for &(when, snap) in deadlines {
+                let late = interfering(snaps, &out.codes, snap)
+                    .into_iter()
+                    .any(|k| out.times[k] + eps > when + TOL);
+                if late {
+                    return None;
+                }
+            }
+        }
+        // Python's max(..., default=0.0) over the times of the steps that are not TILs.
+        let mut span: Option<f64> = None;
+        for (k, &t) in out.times.iter().enumerate() {
+            if out.kinds[k] != TIL {
+                span = Some(match span {
+                    Some(best) if t > best => t,
+                    Some(best) => best,
+                    None => t,
+                });
+            }
+        }
+        out.span = span.unwrap_or(0.0);
+        Some(out)
+    }
+
+    /// `stn._settle`: propagate earliest times from step `first` on; false on a
+    /// positive cycle.
+    fn settle(&mut self, mut first: usize, waits: &[Wait], eps: f64) -> bool {
+        let n = self.kinds.len();
+        for _ in 0..n + 1 {
+            for k in first..n {
+                let mut value = self.times[k];
+                for e in self.edge_off[k]..self.edge_off[k + 1] {
+                    let (i, w) = (self.edge_src[e], self.edge_w[e]);
+                    if self.times[i] + w > value {
+                        value = self.times[i] + w;
+                    }
+                }
+                self.times[k] = value;
+            }
+            let mut lowest = n;
+            for k in 0..n {
+                if self.kinds[k] == TIL {
+                    if self.times[k] > self.highs[k] + TOL {
+                        return false;
+                    }
+                } else if self.kinds[k] == END {
+                    let p = self.partners[k] as usize;
+                    if self.times[k] - self.times[p] > self.highs[k] + TOL {
+                        self.times[p] = self.times[k] - self.highs[k];
+                        lowest = lowest.min(p);
+                    }
+                }
+            }
+            for wait in waits {
+                // Python's max() over the steps' times, then + eps.
+                let mut latest = self.times[wait.after[0]];
+                for &k in &wait.after[1..] {
+                    if self.times[k] > latest {
+                        latest = self.times[k];
+                    }
+                }
+                let latest = latest + eps;
+                if latest - self.times[wait.start] > wait.high + TOL {
+                    self.times[wait.start] = latest - wait.high;
+                    lowest = lowest.min(wait.start);
+                }
+            }
+            if lowest == n {
+                return true;
+            }
+            first = lowest;
+        }
+        false
     }
 }
 
@@ -564,5 +862,6 @@ impl Interference {
 fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Graph>()?;
     m.add_class::<Interference>()?;
+    m.add_class::<Schedule>()?;
     Ok(())
 }

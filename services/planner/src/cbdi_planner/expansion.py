@@ -99,7 +99,7 @@ class Expander:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
         if state.open:
             raise ValueError("a search root cannot have running actions")
-        return self.evaluate(state, Timeline(epsilon=self.epsilon, oracle=self._oracle), ())
+        return self.evaluate(state, Timeline.start(self.epsilon, self._oracle), ())
 
     def aim(self, subgoal: int | None) -> None:
         """Search for the facts `subgoal` only (a stage of a goal agenda); None: the goal."""

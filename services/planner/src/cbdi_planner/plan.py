@@ -54,11 +54,12 @@ def plan_from_timeline(task: Task, timeline: Timeline) -> Plan:
     """Read the scheduled plan off a complete timeline (every start has its end), leaving
     out the planner's internal actions (those of a disjunctive goal)."""
     ends = {s.partner: k for k, s in enumerate(timeline.steps) if s.kind == END}
+    times = timeline.times  # read once (a copy, on the compiled core)
     out = []
     for k, step in enumerate(timeline.steps):
         if step.kind not in (START, INST) or task.actions[step.action].internal:
             continue  # ends are read with their starts; internal actions are no plan's
-        time = round(timeline.times[k], 6)
+        time = round(times[k], 6)
         name = task.actions[step.action].name
         if step.kind == INST:
             out.append(ScheduledAction(time, name, None))
@@ -66,7 +67,7 @@ def plan_from_timeline(task: Task, timeline: Timeline) -> Plan:
             end = ends.get(k)
             if end is None:
                 raise PlanInvalid(f"action ({name}) never ends")
-            duration = round(timeline.times[end] - timeline.times[k], 6)
+            duration = round(times[end] - times[k], 6)
             out.append(ScheduledAction(time, name, duration))
     out.sort(key=lambda a: a.time)
     return Plan(tuple(out))

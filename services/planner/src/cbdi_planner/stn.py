@@ -18,9 +18,10 @@ it interferes with must come before its fixed time).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
+from typing import Any
 
 from cbdi_planner.task import Snap, bit_positions
 
@@ -80,46 +81,70 @@ def _interfering(steps: tuple[Step, ...], b: Snap) -> list[int]:
 
 
 class Oracle:
-    """Which happenings interfere, answered by the compiled core (`cbdi_planner.core`).
+    """The compiled core's simple temporal networks (`cbdi_planner.core`).
 
-    Each snap gets a code the first time it is asked about (by its identity: the task's
-    snaps live as long as the search); a timeline keeps its steps' codes beside them.
+    Each snap gets a code the first time a step of it is scheduled (looked up by its
+    identity: the task's snaps live as long as the search).
     """
 
     def __init__(self, core: ModuleType) -> None:
-        self._core = core.Interference()
+        self.core = core.Interference()
+        self._schedule = core.Schedule
         self._codes: dict[int, int] = {}
         self._snaps: list[Snap] = []  # kept alive, so that no other snap takes an id
+
+    def empty(self) -> Any:
+        """Return the compiled network of no step."""
+        return self._schedule()
 
     def code(self, snap: Snap) -> int:
         """Return the code of `snap`, given it now if it has none."""
         found = self._codes.get(id(snap))
         if found is None:
             masks = (snap.reads, snap.writes, snap.add, snap.dele, snap.num_reads, snap.num_writes)
-            found = int(self._core.add(*(bit_positions(m) for m in masks)))
+            found = int(self.core.add(*(bit_positions(m) for m in masks)))
             self._codes[id(snap)] = found
             self._snaps.append(snap)
         return found
 
-    def interfering(self, codes: tuple[int, ...], snap: Snap) -> list[int]:
-        """`_interfering` over the steps of `codes`."""
-        return self._core.interfering(codes, self.code(snap))  # type: ignore[no-any-return]
+
+@dataclass(frozen=True, slots=True)
+class _Net:
+    """The Python core's network: each step's incoming edges, the earliest times."""
+
+    edges: tuple[tuple[tuple[int, float], ...], ...] = ()
+    times: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
 class Timeline:
     """Steps, their incoming ordering edges and their earliest consistent times.
 
-    With an `oracle` (the compiled core), `codes` holds each step's snap code.
+    `net` holds the numbers: the Python core's (`_Net`), or with an `oracle` the
+    compiled core's network, which does exactly what `extend` does here.
     """
 
     steps: tuple[Step, ...] = ()
-    edges: tuple[tuple[tuple[int, float], ...], ...] = ()
-    times: tuple[float, ...] = ()
+    net: Any = field(default_factory=_Net, compare=False)
     epsilon: float = 0.001
     span: float = 0.0
     oracle: Oracle | None = field(default=None, compare=False)
-    codes: tuple[int, ...] = field(default=(), compare=False)
+
+    @staticmethod
+    def start(epsilon: float, oracle: Oracle | None = None) -> Timeline:
+        """Return the timeline of no step (on the compiled core with an oracle)."""
+        net = oracle.empty() if oracle is not None else _Net()
+        return Timeline(net=net, epsilon=epsilon, oracle=oracle)
+
+    @property
+    def times(self) -> Sequence[float]:
+        """Each step's earliest time (a copy on the compiled core: read it once)."""
+        return self.net.times  # type: ignore[no-any-return]
+
+    @property
+    def edges(self) -> Sequence[Sequence[tuple[int, float]]]:
+        """Each step's incoming edges `(earlier step, least distance)`."""
+        return self.net.edges  # type: ignore[no-any-return]
 
     @property
     def makespan(self) -> float:
@@ -132,28 +157,41 @@ class Timeline:
         `future` lists the happenings still to come after `step` (the ends of the
         actions running after it, the timed literals not yet happened).
         """
-        eps, oracle = self.epsilon, self.oracle
-        if oracle is not None:
-            codes = (*self.codes, oracle.code(step.snap))
-            incoming = [(i, eps) for i in oracle.interfering(self.codes, step.snap)]
-        else:
-            codes = ()
-            incoming = [(i, eps) for i in _interfering(self.steps, step.snap)]
+        if self.oracle is not None:
+            return self._extend_compiled(step, future, self.oracle)
+        eps = self.epsilon
+        incoming = [(i, eps) for i in _interfering(self.steps, step.snap)]
         if step.kind == END:
             incoming.append((step.partner, step.low))
-        edges = (*self.edges, tuple(incoming))
+        edges = (*self.net.edges, tuple(incoming))
         steps = (*self.steps, step)
-        times = [*self.times, 0.0]
+        times = [*self.net.times, 0.0]
         n = len(steps) - 1
         times[n] = self._base(step, incoming, times)
-        find = _finder(steps, oracle, codes)
-        waits = _waits(steps, future, find) if future is not None else ()
+        waits = _waits(steps, future) if future is not None else ()
         if not _settle(steps, edges, times, n, waits, eps):
             return None
-        if future is not None and not _before_deadlines(times, future, eps, find):
+        if future is not None and not _before_deadlines(steps, times, future, eps):
             return None
         span = max((t for t, s in zip(times, steps, strict=True) if s.kind != TIL), default=0.0)
-        return Timeline(steps, edges, tuple(times), eps, span, oracle, codes)
+        return Timeline(steps, _Net(edges, tuple(times)), eps, span)
+
+    def _extend_compiled(
+        self, step: Step, future: Future | None, oracle: Oracle
+    ) -> Timeline | None:
+        coming = None
+        if future is not None:
+            coming = (
+                [(start, oracle.code(snap)) for start, snap in future.ends],
+                [(when, oracle.code(snap)) for when, snap in future.deadlines],
+            )
+        code = oracle.code(step.snap)
+        net = self.net.extend(
+            oracle.core, step.kind, step.partner, step.low, step.high, code, coming, self.epsilon
+        )
+        if net is None:
+            return None
+        return Timeline((*self.steps, step), net, self.epsilon, net.span, oracle)
 
     @staticmethod
     def _base(step: Step, incoming: list[tuple[int, float]], times: list[float]) -> float:
@@ -180,37 +218,27 @@ class Future:
 _Wait = tuple[int, float, tuple[int, ...]]
 
 
-def _finder(
-    steps: tuple[Step, ...], oracle: Oracle | None, codes: tuple[int, ...]
-) -> Callable[[Snap], list[int]]:
-    """Return what finds the steps a snap interferes with (the oracle's, or Python's)."""
-    if oracle is not None:
-        return lambda snap: oracle.interfering(codes, snap)
-    return lambda snap: _interfering(steps, snap)
-
-
-def _waits(
-    steps: tuple[Step, ...], future: Future, find: Callable[[Snap], list[int]]
-) -> tuple[_Wait, ...]:
+def _waits(steps: tuple[Step, ...], future: Future) -> tuple[_Wait, ...]:
     """Return, for each running action, the steps its future end must follow."""
     out = []
     for start, end_snap in future.ends:
         high = steps[start].high
         if high == math.inf:
             continue
-        after = tuple(k for k in find(end_snap) if k != start)
+        after = tuple(k for k in _interfering(steps, end_snap) if k != start)
         if after:
             out.append((start, high, after))
     return tuple(out)
 
 
 def _before_deadlines(
-    times: list[float], future: Future, eps: float, find: Callable[[Snap], list[int]]
+    steps: tuple[Step, ...], times: list[float], future: Future, eps: float
 ) -> bool:
     """Tell whether every step a future timed literal interferes with can precede it."""
     for when, snap in future.deadlines:
-        if any(times[k] + eps > when + _TOL for k in find(snap)):
-            return False
+        for k, old in enumerate(steps):
+            if times[k] + eps > when + _TOL and interferes(old.snap, snap):
+                return False
     return True
 
 

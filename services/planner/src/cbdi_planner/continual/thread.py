@@ -98,16 +98,17 @@ def segment(task: Task, node: Node, first: int) -> Plan:
     Every action started in the segment ends in it when `node` has no running action.
     """
     tl = node.timeline
+    times = tl.times  # read once (a copy, on the compiled core)
     ends = {s.partner: k for k, s in enumerate(tl.steps) if s.kind == END}
     out = []
     for k in _plan_steps(task, node, first):
         step = tl.steps[k]
-        when = round(tl.times[k], 6)
+        when = round(times[k], 6)
         name = task.actions[step.action].name
         if step.kind == INST:
             out.append(ScheduledAction(when, name, None))
         else:
-            dur = round(tl.times[ends[k]] - tl.times[k], 6)
+            dur = round(times[ends[k]] - times[k], 6)
             out.append(ScheduledAction(when, name, dur))
     out.sort(key=lambda a: a.time)
     return Plan(tuple(out))
