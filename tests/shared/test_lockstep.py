@@ -316,3 +316,27 @@ async def test_a_lost_sample_costs_one_timeout_not_one_per_epoch() -> None:
     await gate.put(ack(2, {BELIEFS: 1}, seq=3))
     third = await gate.wait([Need(S, 2)], 30.0)
     assert third.late == [] and third.messages == [(BELIEFS, beliefs(0))]
+
+
+async def test_a_repeated_epoch_makes_a_member_send_its_ack_again() -> None:
+    """A restarted world publishes the epoch it was stopped in again. Its token may come
+    before its predecessor's goes (a killed process's lease not yet out), so the token
+    watch sees no change: the repeat itself makes the member say its ack again."""
+    network = MemoryNetwork()
+    member = network.bus()
+    heard = messages(network.bus(), keys.epoch_ack("r1", "scheduler"), EpochAck, LogSink())
+    step = Lockstep([keys.world_stream("clock")], lambda first: None, bus=member, me=S)
+    clock = keys.world_stream("clock")
+
+    def tick(epoch: int, seq: int) -> Stamped:
+        t = Tick(epoch=epoch, time=float(epoch), epoch_duration=1.0, speed=0.0, lockstep=True)
+        return Stamped(clock, seq, seq, t)
+
+    await step.put(tick(0, 1))  # lockstep decided
+    await send_ack(member, "r1", "scheduler", 4)
+    _, sent = await anext(heard)
+    await step.put(tick(5, 2))  # a new epoch: nothing said again
+    await step.put(tick(4, 1))  # the restarted world's repeat of epoch 4
+    async with asyncio.timeout(5):
+        _, again = await anext(heard)
+    assert again == sent and member.sent[keys.epoch_ack("r1", "scheduler")] == 2

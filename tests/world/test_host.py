@@ -79,3 +79,22 @@ async def test_a_restart_replays_what_followed_the_save_and_publishes_what_did_n
     _, tick = await anext(ticks)
     assert tick.epoch == 8 and "event=recovered" in out.getvalue()
     assert "replay_differs" not in out.getvalue()
+
+
+async def test_an_ack_seen_before_the_state_file_is_read_is_not_taken_back(
+    tmp_path: Path,
+) -> None:
+    """A member sends its latest ack again the moment the world's token is back, which
+    may be before the restarted world has read its state file: the state file's older
+    marks must not overwrite it (the run then stalled for an ack timeout)."""
+    from cbdi.lockstep import stage_rank
+    from cbdi.wire.world import EpochAck
+
+    world = host(tmp_path / "world.state", MemoryBus(), io.StringIO())
+    await world.acks.observe(EpochAck(agent="robot1", epoch=10, component="executor"))
+    member, done = keys.member("robot1", "executor"), stage_rank("done")
+    world.restore_marks({member: (9, done)}, {member: 10}, {member: 1})
+    assert world.acks.acked[member] == (10, done)  # the later mark stays
+    assert world.acks.waiting_for(10, "done") == []  # caught up: not behind
+    world.restore_marks({member: (12, done)}, {}, {})
+    assert world.acks.acked[member] == (12, done)  # a later saved mark is taken

@@ -42,7 +42,7 @@ from cbdi.epoch_gate import WORLD, EpochGate, GateResult, Need, default_sender, 
 from cbdi.errors import CbdiError
 from cbdi.view import world_info
 from cbdi.wire.base import Message
-from cbdi.wire.world import ClockRequest, EpochAck, Tick
+from cbdi.wire.world import PERCEPTS, ClockRequest, EpochAck, Tick
 
 __all__ = [
     "WORLD",
@@ -121,10 +121,23 @@ class Lockstep:
             self.on = False
             return [*self._flush(), (item.key, msg)]
         if self.on:
+            await self._say_again(msg)
             if self.keep_ticks or not isinstance(msg, Tick):
                 await self.gate.put(item)
             return []
         return [(item.key, msg)]
+
+    async def _say_again(self, msg: Message) -> None:
+        """A restarted world publishes the epoch it was stopped in again: a member that
+        acknowledged it already sends that ack again (the world's successor waits for
+        it). Its liveliness token alone cannot tell: the new world's token may come
+        before the old one's goes (a killed process's lease has yet to run out)."""
+        if self.bus is None or not self.me or not isinstance(msg, (Tick, *PERCEPTS)):
+            return
+        latest = _LATEST.get(self.bus, {}).get(self.me)
+        if latest is not None and latest.epoch >= msg.epoch >= 0:
+            agent, _, component = self.me.partition("/")
+            await publish(self.bus, keys.epoch_ack(agent, component), latest, block=True)
 
     async def _decide(self, item: Stamped, tick: Tick) -> list[tuple[str, Message]]:
         self.on = tick.lockstep

@@ -239,8 +239,14 @@ class WorldService:
     def restore_marks(
         self, acked: dict[str, tuple[int, int]], behind: dict[str, int], stalls: dict[str, int]
     ) -> None:
-        self.acks.acked.update((m, a) for m, a in acked.items() if m in self.acks.acked)
-        self.acks.behind = dict(behind)
+        """Take the lockstep marks of the state file; an ack seen since it started (a
+        member sends its latest again as soon as the world's token is back, which may
+        be before the state file is read) is not taken back: the later mark stays."""
+        marks = self.acks.acked
+        for m, a in acked.items():
+            if m in marks:
+                marks[m] = max(marks[m], (int(a[0]), int(a[1])))
+        self.acks.behind = {m: e for m, e in behind.items() if m not in marks or marks[m][0] < e}
         self.acks.stalls = Counter(stalls)
 
     async def go_on(self, result: EpochResult, published: bool) -> None:
