@@ -170,3 +170,20 @@ def test_timelines_are_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
             node = ex.evaluate(state, timeline, running)
         schedules.append(seen)
     assert schedules[0] == schedules[1] and schedules[0]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    keys=st.lists(
+        st.one_of(st.integers(0, 64), st.integers(0, 10_000), st.integers(0, 1 << 40)),
+        max_size=3000,
+    )
+)
+def test_sets_iterate_in_cpythons_order(keys: list[int]) -> None:
+    """The relaxed plan iterates sets where the order decides: the core emulates `set`'s."""
+    core = compiled("compiled")
+    assert core is not None
+    expected: set[int] = set()
+    for key in keys:
+        expected.add(key)
+    assert core.set_order(keys) == list(expected)

@@ -3,15 +3,21 @@
 //! The Python core (`cbdi_planner.heuristic`) is the reference: every function here does
 //! exactly what its Python twin does, in the same order and with the same floating-point
 //! operations, so that a search gives the same states, expansions and plans with either
-//! (`tests/planner/test_compiled_core.py` checks it). What is here so far: the layered
-//! exploration of the temporal relaxed planning graph (`RelaxedPlanGraph._explore`),
-//! the hottest part of a search (about 60% of its time on a 30x30 map), and the simple
-//! temporal network of a partial plan (`cbdi_planner.stn.Timeline`): which earlier steps
-//! a new one must follow, and the earliest consistent times.
+//! (`tests/planner/test_compiled_core.py` checks it). What is here so far: a state's
+//! whole heuristic estimate in one call (`RelaxedPlanGraph.estimate`: the layered
+//! exploration of the temporal relaxed planning graph and FF's relaxed plan extracted
+//! from it, with CPython's set order emulated where it decides, `pyset`), the hottest
+//! part of a search, and the simple temporal network of a partial plan
+//! (`cbdi_planner.stn.Timeline`): which earlier steps a new one must follow, and the
+//! earliest consistent times.
 //!
 //! A call runs without the interpreter lock: a service's event loop keeps going while
 //! its planner explores.
 
+mod extract;
+mod pyset;
+
+use extract::{extract, Ops, Relaxed};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyTuple, PyTupleMethods};
@@ -195,6 +201,12 @@ struct Graph {
     til_ops: Vec<usize>,
     op_pre: Vec<Vec<usize>>,
     chained_end: HashMap<usize, usize>,
+    op_kind: Vec<u8>,
+    op_action: Vec<usize>,
+    op_add: Vec<Vec<usize>>,
+    adders: Vec<Vec<usize>>,
+    start_op: Vec<i64>,
+    op_duration: Vec<f64>,
 }
 
 fn cond_of(obj: &Bound<'_, PyAny>) -> PyResult<Cond> {
@@ -240,10 +252,23 @@ impl Graph {
         let counts: Vec<i64> = rpg.getattr("counts")?.extract()?;
         let op_pre: Vec<Vec<usize>> = rpg.getattr("op_pre")?.extract()?;
         let op_add: Vec<Vec<usize>> = rpg.getattr("op_add")?.extract()?;
+        let op_kind: Vec<u8> = rpg.getattr("op_kind")?.extract()?;
+        let op_action: Vec<usize> = rpg.getattr("op_action")?.extract()?;
+        let starts: HashMap<usize, usize> = rpg.getattr("start_op")?.extract()?;
+        let actions = op_action.iter().map(|&a| a + 1).max().unwrap_or(0);
+        let mut start_op = vec![-1i64; actions];
+        for (a, k) in starts {
+            if a >= actions {
+                return Err(PyValueError::new_err(format!(
+                    "start of unknown action {a}"
+                )));
+            }
+            start_op[a] = k as i64;
+        }
         let fires: Vec<(bool, i64, Vec<usize>, Vec<usize>)> = rpg.getattr("_fire")?.extract()?;
         let fire = fires
             .into_iter()
-            .zip(op_add)
+            .zip(op_add.iter().cloned())
             .map(|((numeric, then, live, quiet), all)| Fire {
                 numeric,
                 then,
@@ -282,6 +307,12 @@ impl Graph {
             til_ops: rpg.getattr("til_ops")?.extract()?,
             op_pre,
             chained_end: rpg.getattr("chained_end")?.extract()?,
+            op_kind,
+            op_action,
+            op_add,
+            adders: rpg.getattr("adders")?.extract()?,
+            start_op,
+            op_duration: rpg.getattr("op_duration")?.extract()?,
         };
         graph.check()?;
         Ok(graph)
@@ -299,6 +330,44 @@ impl Graph {
         nums: Vec<f64>,
         goals: Vec<usize>,
     ) -> PyResult<Option<Layers>> {
+        self.check_state(facts, &open, &goals)?;
+        let facts = facts.to_vec();
+        Ok(py.detach(move || self.run(&facts, &open, til, nums, &goals)))
+    }
+
+    /// `RelaxedPlanGraph.estimate` of a state (as `explore` takes it) without the cache:
+    /// `(length, helpful, duration)` of its relaxed plan (helpful happenings as sorted
+    /// `(kind, action)` pairs), or None when a goal is never reached.
+    fn estimate(
+        &self,
+        py: Python<'_>,
+        facts: &[u8],
+        open: Vec<usize>,
+        til: usize,
+        nums: Vec<f64>,
+        goals: Vec<usize>,
+    ) -> PyResult<Option<Relaxed>> {
+        self.check_state(facts, &open, &goals)?;
+        let facts = facts.to_vec();
+        Ok(py.detach(move || {
+            let (level, achiever, op_level) = self.run(&facts, &open, til, nums, &goals)?;
+            let ops = Ops {
+                kind: &self.op_kind,
+                action: &self.op_action,
+                pre: &self.op_pre,
+                add: &self.op_add,
+                adders: &self.adders,
+                start_op: &self.start_op,
+                duration: &self.op_duration,
+            };
+            Some(extract(&ops, &goals, &level, &achiever, &op_level, til))
+        }))
+    }
+}
+
+impl Graph {
+    /// Refuse a state or goals outside the graph.
+    fn check_state(&self, facts: &[u8], open: &[usize], goals: &[usize]) -> PyResult<()> {
         if let Some(bad) = goals.iter().find(|&&g| g >= self.size) {
             return Err(PyValueError::new_err(format!(
                 "goal {bad} is outside the graph"
@@ -316,12 +385,9 @@ impl Graph {
         if outside {
             return Err(PyValueError::new_err("a fact is outside the graph"));
         }
-        let facts = facts.to_vec();
-        Ok(py.detach(move || self.run(&facts, &open, til, nums, &goals)))
+        Ok(())
     }
-}
 
-impl Graph {
     fn check(&self) -> PyResult<()> {
         let ops = self.fire.len();
         let fact_ok = |f: &usize| *f < self.size;
@@ -341,7 +407,15 @@ impl Graph {
             && self.op_pre.iter().all(|p| p.iter().all(fact_ok))
             && self.free.iter().all(op_ok)
             && self.til_ops.iter().all(op_ok)
-            && self.chained_end.values().all(op_ok);
+            && self.chained_end.values().all(op_ok)
+            && self.op_kind.len() == ops
+            && self.op_action.len() == ops
+            && self.op_add.len() == ops
+            && self.op_duration.len() == ops
+            && self.adders.len() == self.size
+            && self.adders.iter().all(|a| a.iter().all(op_ok))
+            && self.op_add.iter().all(|a| a.iter().all(fact_ok))
+            && self.start_op.iter().all(|&k| k < ops as i64);
         if ok {
             Ok(())
         } else {
@@ -858,8 +932,20 @@ impl Schedule {
     }
 }
 
+/// The order in which CPython's `set` iterates `keys` added one by one (the compiled
+/// core's emulation of it, which the tests check against `set`).
+#[pyfunction]
+fn set_order(keys: Vec<usize>) -> Vec<usize> {
+    let mut set = pyset::PySet::new();
+    for key in keys {
+        set.add(key);
+    }
+    set.iter().collect()
+}
+
 #[pymodule]
 fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(set_order, m)?)?;
     m.add_class::<Graph>()?;
     m.add_class::<Interference>()?;
     m.add_class::<Schedule>()?;

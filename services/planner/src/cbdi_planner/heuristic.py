@@ -195,6 +195,8 @@ class RelaxedPlanGraph:
         self.counts = [len(op.pre) for op in ops]
         self.op_pre = [op.pre for op in ops]
         self.op_add = [op.add for op in ops]
+        self.op_kind = [op.kind for op in ops]
+        self.op_action = [op.action for op in ops]
         # The facts an op adds split by whether some op counts them: the others (the
         # `pending` and `ended` tokens of chained actions, mostly) get a layer but need
         # no pass through the frontier.
@@ -258,16 +260,34 @@ class RelaxedPlanGraph:
         if known is not None:
             return known
         goals = list(self.goal) + [self.ended + a for a in state.open]
+        if self._core is not None:
+            estimate = self._estimate_compiled(state, goals)
+        else:
+            estimate = self._estimate(state, goals)
+        if len(self._known) >= KNOWN:
+            del self._known[next(iter(self._known))]  # the oldest
+        self._known[key] = estimate
+        return estimate
+
+    def _estimate(self, state: State, goals: list[int]) -> Estimate:
+        """Explore the graph of `state` and extract the relaxed plan of `goals`."""
         reached = self._explore(state, goals)
         if reached is None:
             estimate = Estimate(INFINITE, frozenset())
         else:
             level, achiever, op_level = reached
             estimate = self._extract(goals, level, achiever, op_level, state)
-        if len(self._known) >= KNOWN:
-            del self._known[next(iter(self._known))]  # the oldest
-        self._known[key] = estimate
         return estimate
+
+    def _estimate_compiled(self, state: State, goals: list[int]) -> Estimate:
+        """`_estimate` by the compiled core, in one call without the interpreter lock."""
+        facts = state.facts
+        packed = facts.to_bytes((facts.bit_length() + 7) // 8, "little")
+        found = self._core.estimate(packed, state.open, state.til, state.nums, goals)  # type: ignore[union-attr]
+        if found is None:
+            return Estimate(INFINITE, frozenset())
+        value, helpful, duration = found
+        return Estimate(value, frozenset(helpful), duration)
 
     def _explore(
         self, state: State, goals: list[int]
@@ -282,7 +302,7 @@ class RelaxedPlanGraph:
         if self._core is not None:
             facts = state.facts
             packed = facts.to_bytes((facts.bit_length() + 7) // 8, "little")
-            return self._core.explore(packed, state.open, state.til, state.nums, goals)  # type: ignore[no-any-return]
+            return self._core.explore(packed, state.open, state.til, state.nums, goals)
         level = [-1] * self.size
         achiever = [-1] * self.size
         op_level = [-1] * len(self.ops)
@@ -419,5 +439,7 @@ class RelaxedPlanGraph:
                 op = ops[k]
                 if op.kind == END and op_level[self.start_op[op.action]] == 0:
                     helpful.add((START, op.action))
-        duration = sum(self.op_duration[k] for k in chosen)
+        duration = 0.0  # summed in set order, one addition at a time, as the compiled core does
+        for k in chosen:
+            duration += self.op_duration[k]
         return Estimate(len(chosen), frozenset(helpful), duration)

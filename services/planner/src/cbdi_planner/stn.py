@@ -139,12 +139,12 @@ class Timeline:
     @property
     def times(self) -> Sequence[float]:
         """Each step's earliest time (a copy on the compiled core: read it once)."""
-        return self.net.times  # type: ignore[no-any-return]
+        return self.net.times
 
     @property
     def edges(self) -> Sequence[Sequence[tuple[int, float]]]:
         """Each step's incoming edges `(earlier step, least distance)`."""
-        return self.net.edges  # type: ignore[no-any-return]
+        return self.net.edges
 
     @property
     def makespan(self) -> float:
