@@ -32,7 +32,7 @@ from cbdi_planner.grounding import ground
 from cbdi_planner.heuristic import RelaxedPlanGraph
 from cbdi_planner.pddl import parse_domain, parse_problem
 from cbdi_planner.search import Budget, search
-from cbdi_planner.state import State
+from cbdi_planner.state import State, initial_state
 from cbdi_planner.task import Task
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -152,3 +152,20 @@ def test_feature_estimates_match_the_reference(
     monkeypatch: pytest.MonkeyPatch, domain_text: str, problem_text: str
 ) -> None:
     _assert_same(monkeypatch, _text(domain_text, problem_text), least=10)
+
+
+def test_a_graph_is_built_once_for_tasks_that_differ_only_in_their_facts() -> None:
+    """`RelaxedPlanGraph.of`: a planner's per-epoch task reuses the operators built for
+    an earlier one of the same grounding, and estimates exactly as a graph built anew."""
+    task = _recycling("warehouse-15x15")
+    rng = random.Random(7)
+    first = RelaxedPlanGraph.of(task)
+    moved = replace(task, init_facts=_shaken(initial_state(task), task, rng).facts)
+    again = RelaxedPlanGraph.of(moved)
+    assert again.ops is first.ops and again.task is moved and again._known is not first._known
+    state = initial_state(moved)
+    assert again.estimate(state) == RelaxedPlanGraph(moved).estimate(state)
+    again.aim(0)  # one copy's goal is its own
+    assert first.goal == RelaxedPlanGraph(task).goal
+    other = replace(task, goal=task.goal & (task.goal - 1))  # another goal: another graph
+    assert RelaxedPlanGraph.of(other).ops is not first.ops

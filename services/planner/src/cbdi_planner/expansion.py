@@ -74,7 +74,7 @@ class Expander:
         self.task = task
         self.epsilon = epsilon
         self.compress = compress
-        self.rpg = RelaxedPlanGraph(task, compress=compress, core=core)
+        self.rpg = RelaxedPlanGraph.of(task, compress=compress, core=core)
         module = compiled(core)
         self._oracle = Oracle(module) if module is not None else None
         self.subgoal: int | None = None

@@ -11,7 +11,10 @@ relaxed-reachable part of the task, not in the number of layers times actions.
 
 from __future__ import annotations
 
+import copy
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 from cbdi_planner.core import compiled
@@ -24,6 +27,7 @@ __all__ = ["INFINITE", "Estimate", "RelaxedPlanGraph"]
 
 INFINITE = 1 << 30
 KNOWN = 4096  # estimates remembered (oldest forgotten first): a few MB on a 30x30 map
+BUILT = 8  # graphs kept for `RelaxedPlanGraph.of` (least recently used forgotten first)
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,6 +182,47 @@ class RelaxedPlanGraph:
         self._index(then)
         module = compiled(core)
         self._core = module.Graph(self) if module is not None else None
+
+    _built: OrderedDict[tuple[object, ...], tuple[RelaxedPlanGraph, object]] = OrderedDict()
+    _building = threading.Lock()
+
+    @classmethod
+    def of(cls, task: Task, compress: bool = False, core: str | None = None) -> RelaxedPlanGraph:
+        """A graph of `task`, built once for every task that differs only in its facts.
+
+        A planner makes a task per request and per epoch from one grounding (the same
+        actions, timed literals and goal; another initial state), and building the
+        graph costs as much as a few hundred evaluations on a big map: the operators
+        depend on the actions and on the numeric values their durations read, so a
+        task with the same ones gets a copy of the graph built before (its operators
+        shared, read only; its own goal and remembered estimates).
+        """
+        key = (
+            id(task.actions),
+            id(task.tils),
+            task.goal,
+            task.init_nums,
+            len(task.facts),
+            compress,
+            compiled(core) is not None,
+        )
+        with cls._building:
+            found = cls._built.get(key)
+            if found is not None:
+                cls._built.move_to_end(key)
+        if found is None:
+            graph = cls(task, compress=compress, core=core)
+            with cls._building:
+                # the entry holds what the key's ids name, so they stay theirs
+                cls._built[key] = (graph, (task.actions, task.tils))
+                while len(cls._built) > BUILT:
+                    cls._built.popitem(last=False)
+            found = (graph, None)
+        twin = copy.copy(found[0])
+        twin.task = task
+        twin.goal = _bits(task.goal)
+        twin._known = {}
+        return twin
 
     def _index(self, then: dict[int, int]) -> None:
         """Flatten the operators into parallel lists for the inner loops of `estimate`."""

@@ -173,5 +173,5 @@ def _with_init(g: Grounding, facts: list[Atom], values: dict[Atom, float]) -> Ta
 def reaches_goal(task: Task, state: State | None = None) -> bool:
     """Tell whether the goal is reachable from `state` (default: the initial state) in
     the relaxed planning graph (deletes ignored)."""
-    graph = RelaxedPlanGraph(task)
+    graph = RelaxedPlanGraph.of(task)
     return graph.levels(state or initial_state(task), task.goal) is not None

@@ -63,5 +63,5 @@ class Transients:
             task = ground(domain, problem_from_beliefs(domain, relaxed, goal))
         except (GoalError, PlannerError):
             return False
-        graph = RelaxedPlanGraph(task)
+        graph = RelaxedPlanGraph.of(task)
         return graph.levels(initial_state(task), task.goal) is not None
