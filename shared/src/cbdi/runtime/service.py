@@ -34,6 +34,7 @@ from cbdi.runtime.fault import Fault, parse_faults, planned_fault, strike
 from cbdi.runtime.life import end_cleanly
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent
+from cbdi.runtime.stall import watch_loop
 from cbdi.security.secrets import read_credentials, read_zenoh_settings
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
@@ -58,6 +59,13 @@ class ServiceSettings:
     log_format: str = field(default="kv", metadata={"help": "kv or json"})
     heartbeat: float = field(
         default=0.5, metadata={"help": "wall seconds between heartbeats (0: none)"}
+    )
+    stall_limit: float = field(
+        default=1.0,
+        metadata={
+            "help": "wall seconds the event loop may stand before its log names the code "
+            "holding it (loop_stalled, loop_resumed; 0: not watched)"
+        },
     )
     credentials: str = field(
         default="",
@@ -192,6 +200,9 @@ def run_services(services: Sequence[Hosted]) -> int:
             if not (math.isfinite(beat) and beat >= 0):
                 raise ValueError(f"heartbeat must be a finite number >= 0, got {beat}")
             parse_faults(s.settings.fault)
+            stall = s.settings.stall_limit
+            if not (math.isfinite(stall) and stall >= 0):
+                raise ValueError(f"stall_limit must be a finite number >= 0, got {stall}")
         except ValueError as exc:
             print(f"{s.service}: bad settings: {exc}")
             return 2
@@ -229,11 +240,15 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
 
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop)
+    limit = services[0].settings.stall_limit
+    watch = loop.create_task(watch_loop(logs[0], limit), name="stall-watch") if limit else None
     try:
         async with asyncio.TaskGroup() as tg:
             for ctx, s in zip(contexts, services, strict=True):
                 tg.create_task(_host(ctx, s.main, contexts), name=ctx.service)
     finally:
+        if watch is not None:
+            watch.cancel()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.remove_signal_handler(sig)
     return next((ctx.exit_code for ctx in contexts if ctx.exit_code), 0)
