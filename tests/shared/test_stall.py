@@ -30,6 +30,13 @@ def test_a_starved_loop_is_told_from_a_busy_one() -> None:
     assert judge.check(now=9.0, turned=8.9, cpu=0.4).busy == pytest.approx(0.4 / 7.9)
 
 
+def test_another_thread_holding_the_interpreter_shows_in_the_process_cpu() -> None:
+    judge = StallJudge(0.5)
+    judge.check(now=1.0, turned=1.0, cpu=2.0, process_cpu=5.0)
+    assert judge.check(now=2.0, turned=1.0, cpu=2.01, process_cpu=6.0) == Stalled(1.0)
+    assert judge.check(now=4.1, turned=4.0, cpu=2.02, process_cpu=8.0) == Resumed(3.0, 0.02, 3.0)
+
+
 @pytest.mark.parametrize("limit", [0.0, -1.0, float("nan"), float("inf")])
 def test_a_nonsensical_limit_is_refused(limit: float) -> None:
     with pytest.raises(ValueError, match="stall limit"):
@@ -64,3 +71,4 @@ def test_the_log_names_the_code_that_holds_the_loop() -> None:
     fields = dict(part.split("=", 1) for part in resumed.split() if "=" in part)
     assert float(fields["stood"]) >= 0.2
     assert float(fields["cpu"]) > 0
+    assert float(fields["process_cpu"]) >= float(fields["cpu"])

@@ -9,7 +9,9 @@ A task of the loop marks each turn; a daemon thread looks every `period` wall se
 When the loop has not turned for `limit` seconds it logs `loop_stalled` once, with where
 the loop's thread is (its innermost frames); when the loop turns again it logs
 `loop_resumed` with how long it stood and how much CPU its thread used meanwhile
-(`busy`: the share of the stall it ran). The decisions are `StallJudge`'s (pure); the
+(`busy`: the share of the stall it ran) and the whole process (`process_cpu`: when it
+far exceeds `cpu`, another thread of the process held the interpreter; when both are
+near 0, the machine gave the process no CPU). The decisions are `StallJudge`'s (pure); the
 shell reads the clocks and the frames.
 """
 
@@ -39,10 +41,12 @@ class Stalled:
 
 @dataclass(frozen=True)
 class Resumed:
-    """The loop turned again after a reported stall of `stood` s; its thread ran `cpu` s."""
+    """The loop turned again after a reported stall of `stood` s; its thread ran `cpu` s,
+    the whole process `process_cpu` s (other threads: the rest)."""
 
     stood: float
     cpu: float
+    process_cpu: float = 0.0
 
     @property
     def busy(self) -> float:
@@ -57,20 +61,29 @@ class StallJudge:
         if not (math.isfinite(limit) and limit > 0):
             raise ValueError(f"stall limit must be a finite number > 0, got {limit}")
         self.limit = limit
-        self._since: tuple[float, float] | None = None  # (last turn, cpu then) of a stall
-        self._cpu: float | None = None  # the CPU clock at the last check outside a stall
+        # (last turn, the loop thread's and the process's CPU then) of a stall
+        self._since: tuple[float, float, float] | None = None
+        self._cpu: tuple[float, float] | None = None  # the CPU clocks at the last check
 
-    def check(self, now: float, turned: float, cpu: float) -> Stalled | Resumed | None:
-        """Judge at `now` a loop last seen turning at `turned`, its thread's CPU at `cpu`."""
+    def check(
+        self, now: float, turned: float, cpu: float, process_cpu: float = 0.0
+    ) -> Stalled | Resumed | None:
+        """Judge at `now` a loop last seen turning at `turned`, its thread's CPU clock at
+        `cpu`, the process's at `process_cpu`."""
         if self._since is not None and turned > self._since[0]:
-            last, cpu_then = self._since
+            last, cpu_then, process_then = self._since
             self._since = None
-            return Resumed(round(turned - last, 3), round(max(0.0, cpu - cpu_then), 3))
+            return Resumed(
+                round(turned - last, 3),
+                round(max(0.0, cpu - cpu_then), 3),
+                round(max(0.0, process_cpu - process_then), 3),
+            )
         if self._since is None and now - turned > self.limit:
-            self._since = (turned, cpu if self._cpu is None else self._cpu)
+            then = (cpu, process_cpu) if self._cpu is None else self._cpu
+            self._since = (turned, *then)
             return Stalled(round(now - turned, 3))
         if self._since is None:
-            self._cpu = cpu
+            self._cpu = (cpu, process_cpu)
         return None
 
 
@@ -102,7 +115,7 @@ async def watch_loop(log: Log, limit: float, period: float = 0.1) -> None:
 
     def watch() -> None:
         while not done.wait(period):
-            decision = judge.check(time.monotonic(), turned[0], cpu())
+            decision = judge.check(time.monotonic(), turned[0], cpu(), time.process_time())
             if isinstance(decision, Stalled):
                 log.warning(
                     "loop_stalled", silent_for=decision.silent_for, where=_where(loop_thread)
@@ -112,6 +125,7 @@ async def watch_loop(log: Log, limit: float, period: float = 0.1) -> None:
                     "loop_resumed",
                     stood=decision.stood,
                     cpu=decision.cpu,
+                    process_cpu=decision.process_cpu,
                     busy=f"{decision.busy:.2f}",
                 )
 
