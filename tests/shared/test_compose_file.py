@@ -127,3 +127,41 @@ def test_compose_accepts_the_generated_file(tmp_path: Path) -> None:
 )  # fmt: skip
 def test_wait_exits_with_the_runs_result(reason: str, until: str, code: int) -> None:
     assert exit_code(reason, until) == code
+
+
+def _mounts(text: str) -> set[str]:
+    """Every bind mount's host side, read back from the generated YAML."""
+    import json
+
+    found: set[str] = set()
+    for line in text.splitlines():
+        if line.strip().startswith("volumes: "):
+            mounts = json.loads(line.strip()[len("volumes: ") :])
+            found |= {v.split(":")[0] for v in mounts if ":" in v}  # not anonymous ones
+    return found
+
+
+def test_compose_from_another_directory_writes_the_secrets_beside_the_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Compose resolves `./secrets` from the compose file's folder: `cbdi compose -o
+    DIR/dc.yml` run elsewhere writes them in DIR/secrets, none where it ran."""
+    elsewhere, out = tmp_path / "cwd", tmp_path / "deploy" / "dc.yml"
+    elsewhere.mkdir()
+    out.parent.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert compose.main(["paper-7x7", "--agents", "2", "-o", str(out)]) == 0
+    assert str(out.parent / "secrets") in capsys.readouterr().err
+    assert not (elsewhere / "secrets").exists()
+    text = out.read_text()
+    mounted = {(out.parent / m).resolve() for m in _mounts(text) if m != "./runs"}
+    assert mounted == {(out.parent / "secrets").resolve()}
+    for service, env in (("robot2-executor", "CBDI_CREDENTIALS"), ("router", "CBDI_ACL")):
+        block = text[text.index(f"  {service}:") :]
+        inside = block[block.index(f"{env}: ") + len(env) + 2 :].split("\n", 1)[0]
+        on_host = out.parent / "secrets" / Path(inside).relative_to("/secrets")
+        assert on_host.is_file() and on_host.stat().st_mode & 0o777 == 0o600, on_host
+    # An absolute --secrets stays where it is named.
+    shared = tmp_path / "shared-secrets"
+    assert compose.main(["paper-7x7", "-o", str(out), "--secrets", str(shared)]) == 0
+    assert (shared / "router" / "acl.json").is_file()

@@ -35,7 +35,7 @@ from cbdi.runtime.life import LIFE_ENV
 from cbdi.security import CREDENTIALS_ENV, RunSecrets, create_secrets, grants
 from cbdi.security.policy import COMPOSE_GRANTS
 
-__all__ = ["ComposeOptions", "compose_file", "main", "write_secrets"]
+__all__ = ["ComposeOptions", "compose_file", "main", "secrets_beside", "write_secrets"]
 
 DOMAINS_IN_IMAGE = "/opt/cbdi/domains"  # where the Dockerfile puts domains/
 RUNS_IN_CONTAINER = "/runs"
@@ -199,6 +199,16 @@ def write_secrets(scenario: Scenario, where: Path) -> bool:
     return True
 
 
+def secrets_beside(secrets: str, output: str) -> Path:
+    """Return where the host's secrets go: a relative `--secrets` is one from the compose
+    file's folder, as Compose resolves the file's volumes (from the working directory
+    when the file goes to stdout)."""
+    where = Path(secrets)
+    if where.is_absolute() or output == "-":
+        return where
+    return Path(output).parent / where
+
+
 def _name(service: str) -> str:
     """Compose service names cannot hold '/': robot1/planner is robot1-planner."""
     return service.replace("/", "-")
@@ -297,7 +307,8 @@ def _parser() -> argparse.ArgumentParser:
         "--secrets",
         default=ComposeOptions.secrets,
         help="host directory of the run's credentials, written now (mode 0600) unless it "
-        "holds them already; mounted read-only in every container (docs/security.md)",
+        "holds them already; relative: from the compose file's folder, as Compose reads "
+        "it; mounted read-only in every container (docs/security.md)",
     )
     p.add_argument(
         "--secure",
@@ -360,8 +371,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"cbdi compose: {exc}", file=sys.stderr)
         return 2
-    if opts.secrets and write_secrets(scenario, Path(opts.secrets)):
-        print(f"cbdi compose: wrote the run's credentials in {opts.secrets}", file=sys.stderr)
+    where = secrets_beside(opts.secrets, args.output)
+    if opts.secrets and write_secrets(scenario, where):
+        print(f"cbdi compose: wrote the run's credentials in {where}", file=sys.stderr)
     if args.output == "-":
         sys.stdout.write(text)
     else:
