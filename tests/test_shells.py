@@ -38,7 +38,7 @@ def test_the_planner_and_scheduler_build_their_shells_from_their_arguments() -> 
 def test_a_shell_refuses_a_missing_agent_file_by_name(tmp_path: object) -> None:
     missing = f"{tmp_path}/nowhere.toml"
     for name, build in shells().items():
-        if name == "executor":  # the one without an agent file
+        if name in ("executor", "world"):  # the ones without an agent file
             continue
         with pytest.raises(AgentFileError, match=r"nowhere\.toml"):
             build(["--agent", "robot1", "--agent-file", missing])  # type: ignore[operator]

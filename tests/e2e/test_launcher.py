@@ -204,7 +204,7 @@ def test_ctrl_c_stops_everything(tmp_path: Path) -> None:
             os.kill(pid, 0)
 
 
-def test_broken_map_fails_the_run_at_once_with_the_map_error(tmp_path: Path) -> None:
+def test_broken_map_is_refused_before_the_run_with_the_map_error(tmp_path: Path) -> None:
     bad_map = tmp_path / "bad.toml"
     bad_map.write_text('name = "bad"\ngrid = """\nBA.\n.x.\n"""\n')
     scenario = tmp_path / "scenario.toml"
@@ -213,10 +213,9 @@ def test_broken_map_fails_the_run_at_once_with_the_map_error(tmp_path: Path) -> 
         '[[agents]]\nname = "robot1"\n'
     )
     result = up(str(scenario), "--json", "--quiet", timeout=60)
-    summary = json.loads(result.stdout)
-    assert result.returncode == 1 and summary["result"] == "failed"
-    assert "grid row 1 column 1: unknown cell 'x'" in summary["reason"]
-    assert summary["restarts"]["world"] == 0  # a bad map is not retried
+    # The world is built before anything starts (tests/shared/test_preflight.py).
+    assert result.returncode == 2 and not result.stdout, result.stderr[-2000:]
+    assert "grid row 1 column 1: unknown cell 'x'" in result.stderr
 
 
 def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> None:

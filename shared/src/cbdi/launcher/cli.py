@@ -14,6 +14,7 @@ import uvloop
 
 from cbdi import keys
 from cbdi.errors import ConfigError
+from cbdi.launcher.preflight import check_services
 from cbdi.launcher.process import RESTART_POLICIES, RestartPolicy
 from cbdi.launcher.run import LaunchOptions, RunSummary, launch
 from cbdi.launcher.scenario import (
@@ -291,6 +292,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise ConfigError(
                 "--freeze-kill", str(args.freeze_kill), "must be finite and >= --freeze-limit"
             )
+        check_services(scenario)  # last: it builds every service (the slowest check)
     except ConfigError as exc:
         print(f"cbdi up: {exc}", file=sys.stderr)
         return EXIT_USAGE
