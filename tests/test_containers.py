@@ -86,12 +86,18 @@ def podman_socket(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 
 
 @pytest.fixture(scope="module")
-def image(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    """The cbdi image, built from a fresh clone with tools/image.sh (Podman)."""
+def clone(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A fresh clone of the repository (what is committed, no secrets, no runs)."""
     root = tmp_path_factory.mktemp("clone")
-    clone = root / "cbdi"
-    cloned = _run(["git", "clone", "-q", str(REPO), str(clone)], root, 120)
+    cloned = _run(["git", "clone", "-q", str(REPO), str(root / "cbdi")], root, 120)
     assert cloned.returncode == 0, cloned.stderr
+    return root / "cbdi"
+
+
+@pytest.fixture(scope="module")
+def image(clone: Path) -> Iterator[str]:
+    """The cbdi image, built from a fresh clone with tools/image.sh (Podman)."""
+    root = clone.parent
     tag = f"localhost/cbdi-test:{os.getpid()}"
     started = time.monotonic()
     built = _run(["sh", "tools/image.sh"], clone, 900, CBDI_ENGINE="podman", CBDI_IMAGE=tag)
@@ -166,6 +172,57 @@ def test_two_bdi_robots_in_containers_recycle_everything(
         _compose(path, project, podman_socket, "down")
     print(f"run in {time.monotonic() - started:.0f} s")
     _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
+
+
+def test_the_committed_compose_file_runs_on_a_fresh_clone(
+    clone: Path, image: str, podman_socket: str
+) -> None:
+    """docs/containers.md's commands, verbatim, in a fresh clone: no secrets there (they
+    are not committed); the router makes them before the services log in."""
+    assert not (clone / "secrets").exists()
+    project = {"COMPOSE_PROJECT_NAME": f"cbdi-test-f-{os.getpid()}"}
+    api = {"DOCKER_HOST": podman_socket, "CBDI_IMAGE": image, **project}
+    compose = COMPOSE or "docker-compose"
+    try:
+        assert _run(["mkdir", "-p", "runs"], clone, 10).returncode == 0
+        up = _run([compose, "up", "--exit-code-from", "wait"], clone, 900, **api)
+        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+    finally:
+        _run([compose, "down"], clone, 300, **api)
+    assert (clone / "secrets" / "credentials" / "robot2.planner.json").is_file()
+    _check_recording(clone / "runs" / "paper-7x7.mcap")
+
+
+def test_compose_from_another_directory_runs_with_its_secrets(
+    tmp_path: Path, image: str, podman_socket: str
+) -> None:
+    """`cbdi compose -o DIR/dc.yml` from elsewhere writes the secrets in DIR/secrets,
+    where the file mounts them from; the run uses those (its router keeps them)."""
+    elsewhere, deploy = tmp_path / "elsewhere", tmp_path / "deploy"
+    elsewhere.mkdir()
+    (deploy / "runs").mkdir(parents=True)
+    path = deploy / "dc.yml"
+    made = _run(
+        [str(BIN / "cbdi"), "compose", "paper-7x7", "--agents", "2", "--image", image,
+         "--timeout", "600", "-o", str(path)],
+        elsewhere, 120,
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    assert not (elsewhere / "secrets").exists()
+    written = {p: p.read_bytes() for p in (deploy / "secrets").rglob("*.json")}
+    for name in ("credentials/router.json", "credentials/robot2.executor.json",
+                 "router/acl.json", "router/hub.json"):  # fmt: skip
+        assert deploy / "secrets" / name in written, sorted(written)
+    project = f"cbdi-test-o-{os.getpid()}"
+    argv = [COMPOSE or "docker-compose", "-f", str(path), "-p", project]
+    try:
+        up = _run([*argv, "up", "--exit-code-from", "wait"], elsewhere, 900,
+                  DOCKER_HOST=podman_socket)  # fmt: skip
+        assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
+    finally:
+        _run([*argv, "down"], elsewhere, 300, DOCKER_HOST=podman_socket)
+    assert {p: p.read_bytes() for p in written} == written  # the ones compose wrote
+    _check_recording(deploy / "runs" / "paper-7x7.mcap")
 
 
 def test_a_run_split_over_two_projects_with_joined_routers(

@@ -79,7 +79,11 @@ def test_every_service_logs_in_with_its_own_credentials_mounted_read_only() -> N
     text = compose_file(_scenario(), ComposeOptions())
     assert "CBDI_CREDENTIALS: /secrets/credentials/robot2.executor.json" in text
     assert "CBDI_ACL: /secrets/router/acl.json" in text
-    assert text.count('"./secrets:/secrets:ro"') == text.count("    image: ")
+    # Read-only but for the router, which makes them when they are missing.
+    assert text.count('"./secrets:/secrets:ro"') == text.count("    image: ") - 1
+    router = text[text.index("  router:") : text.index("  monitor:")]
+    assert '"./secrets:/secrets"' in router and "CBDI_SECRETS_DIR: /secrets" in router
+    assert 'CBDI_SECRETS_AGENTS: "robot1:bdi,robot2:bdi"' in router
     assert "CBDI_CREDENTIALS" not in compose_file(_scenario(), ComposeOptions(secrets=""))
 
 
@@ -165,3 +169,22 @@ def test_compose_from_another_directory_writes_the_secrets_beside_the_file(
     shared = tmp_path / "shared-secrets"
     assert compose.main(["paper-7x7", "-o", str(out), "--secrets", str(shared)]) == 0
     assert (shared / "router" / "acl.json").is_file()
+
+
+def test_the_router_makes_the_secrets_every_service_names_when_missing(tmp_path: Path) -> None:
+    """A fresh clone has no ./secrets: the compose run's router makes the ones every
+    container's environment names (into the directory they all mount), and keeps them."""
+    from cbdi.router import RouterSettings, make_secrets
+
+    where = tmp_path / "secrets"
+    text = compose_file(_scenario(), ComposeOptions())
+    settings = RouterSettings(secrets_dir=str(where), secrets_agents=("robot1:bdi", "robot2:bdi"))
+    assert make_secrets(settings)
+    named = [line.split(": ", 1)[1] for line in text.splitlines() if "/secrets/" in line]
+    assert len(named) == 13  # 10 credentials, the users, the ACL, the hub's id
+    for inside in named:
+        assert (where / Path(inside).relative_to("/secrets")).is_file(), inside
+    acl = (where / "router" / "acl.json").read_text()
+    assert not make_secrets(settings) and (where / "router" / "acl.json").read_text() == acl
+    with pytest.raises(ConfigError, match="NAME:KIND"):
+        make_secrets(RouterSettings(secrets_dir=str(where), secrets_agents=("robot1",)))

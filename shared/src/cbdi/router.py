@@ -16,9 +16,11 @@ from typing import Any
 
 from cbdi.bus.zenoh_bus import DEFAULT_ENDPOINT, BusConfig, zenoh_config
 from cbdi.errors import CbdiError, ConfigError
+from cbdi.launcher.scenario import AGENT_KINDS
 from cbdi.runtime import Log, ServiceContext, ServiceSettings, load_config, run_service
+from cbdi.security.secrets import ensure_secrets
 
-__all__ = ["RouterSettings", "main"]
+__all__ = ["RouterSettings", "main", "make_secrets"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,16 @@ class RouterSettings(ServiceSettings):
         default="", metadata={"help": "file of user:password lines: clients must log in"}
     )
     acl: str = field(default="", metadata={"help": "JSON access-control rules (deny by default)"})
+    secrets_dir: str = field(
+        default="",
+        metadata={
+            "help": "make the run's secrets in this directory first when it lacks them "
+            "(a compose run on a fresh clone; kept when there: docs/security.md)"
+        },
+    )
+    secrets_agents: tuple[str, ...] = field(
+        default=(), metadata={"help": "the run's agents, NAME:KIND, for --secrets-dir"}
+    )
 
     def bus_config(self) -> BusConfig:
         """The router's session: listening, with authentication and access control."""
@@ -73,6 +85,21 @@ async def _router(ctx: ServiceContext) -> None:
     ctx.log.info("routing", listen=",".join(ctx.settings.listen), security=secured)
 
 
+def make_secrets(settings: RouterSettings) -> bool:
+    """Make the run's secrets in `secrets_dir` unless it holds them; return whether it
+    wrote them. ConfigError: a bad NAME:KIND."""
+    from cbdi.launcher.compose import compose_grants  # the run's identities
+
+    agents = []
+    for entry in settings.secrets_agents:
+        name, _, kind = entry.partition(":")
+        if kind not in AGENT_KINDS or not name:
+            known = ", ".join(AGENT_KINDS)
+            raise ConfigError("--secrets-agents", entry, f"expected NAME:KIND, KIND one of {known}")
+        agents.append((name, kind))
+    return ensure_secrets(Path(settings.secrets_dir), compose_grants(agents))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run a Zenoh router until SIGTERM/SIGINT."""
     settings = load_config(
@@ -82,6 +109,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         section="router",
         description="Run the Zenoh router every cbdi service connects to.",
     )
+    if settings.secrets_dir:
+        try:
+            if make_secrets(settings):
+                print(f"cbdi router: made the run's secrets in {settings.secrets_dir}")
+        except (CbdiError, OSError) as exc:
+            print(f"cbdi router: {exc}")
+            return 2
     if settings.acl or settings.users:
         from cbdi.security.denials import capture
 

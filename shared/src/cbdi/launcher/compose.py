@@ -32,10 +32,17 @@ from cbdi.launcher.scenario import AGENT_KINDS, Scenario
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
 from cbdi.runtime.fault import FAULT_ENV, parse_faults
 from cbdi.runtime.life import LIFE_ENV
-from cbdi.security import CREDENTIALS_ENV, RunSecrets, create_secrets, grants
+from cbdi.security import CREDENTIALS_ENV, Grant, RunSecrets, ensure_secrets, grants
 from cbdi.security.policy import COMPOSE_GRANTS
 
-__all__ = ["ComposeOptions", "compose_file", "main", "secrets_beside", "write_secrets"]
+__all__ = [
+    "ComposeOptions",
+    "compose_file",
+    "compose_grants",
+    "main",
+    "secrets_beside",
+    "write_secrets",
+]
 
 DOMAINS_IN_IMAGE = "/opt/cbdi/domains"  # where the Dockerfile puts domains/
 RUNS_IN_CONTAINER = "/runs"
@@ -85,14 +92,14 @@ def compose_file(scenario: Scenario, opts: ComposeOptions, command: str = "") ->
         part = agent_of(plan.service) or WORLD_PART
         if plan.service != "router" and part not in wanted:
             continue
-        services[_name(plan.service)] = _service(plan, opts, connect)
+        services[_name(plan.service)] = _service(plan, opts, connect, scenario)
         if plan.service in faults:
             services[_name(plan.service)]["environment"][FAULT_ENV] = faults[plan.service]
     if WORLD_PART in wanted:
         until = "done" if scenario.run.until == "done" else "time_limit"
         args = ("wait", "--until", until, "--timeout", str(opts.timeout))
         wait = ServicePlan("wait", "cbdi", "cbdi.cli", args)
-        services["wait"] = _service(wait, opts, connect)
+        services["wait"] = _service(wait, opts, connect, scenario)
     header = [
         "# Generated; edit the scenario and generate it again:",
         f"#   {command or 'cbdi compose ' + scenario.name}",
@@ -132,15 +139,20 @@ def _parts(scenario: Scenario, only: tuple[str, ...]) -> set[str]:
     return set(only)
 
 
-def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str, Any]:
+def _service(
+    plan: ServicePlan, opts: ComposeOptions, connect: str, scenario: Scenario
+) -> dict[str, Any]:
     service: dict[str, Any] = {"image": opts.image, "command": [plan.script, *plan.args]}
     env = {"CBDI_LOG_FORMAT": "kv", "PYTHONHASHSEED": "0"}
     if plan.service != "router":
-        # Containers start together: wait for the router, do not fail for its absence.
+        # Containers start together: wait for the router (and the credentials it makes
+        # when missing), do not fail for their absence.
         env |= {"CBDI_CONNECT": connect, "CBDI_CONNECT_TIMEOUT": "120"}
     if opts.secrets:
-        env |= _secured(plan.service, hub=not opts.join)
-        service["volumes"] = [f"{opts.secrets}:{SECRETS_IN_CONTAINER}:ro"]
+        env |= _secured(plan.service, scenario, hub=not opts.join)
+        # The router makes the run's secrets when the directory lacks them (a fresh clone)
+        mode = "" if plan.service == "router" else ":ro"
+        service["volumes"] = [f"{opts.secrets}:{SECRETS_IN_CONTAINER}{mode}"]
     service["environment"] = env
     if plan.service == "router" and opts.join:
         service["command"] += [a for j in opts.join for a in ("--connect", j)]
@@ -172,31 +184,34 @@ def _service(plan: ServicePlan, opts: ComposeOptions, connect: str) -> dict[str,
     return service
 
 
-def _secured(service: str, hub: bool) -> dict[str, str]:
+def _secured(service: str, scenario: Scenario, hub: bool) -> dict[str, str]:
     """The environment naming a service's secrets in its container: its credentials (the
     router's: to join another router), and the router's user list and rules; a router
     that joins none is the run's hub, with the hub's Zenoh id, by which the routers
-    that join it know it (`cbdi.security.policy.acl_config`)."""
+    that join it know it (`cbdi.security.policy.acl_config`). The router makes the
+    secrets of the run's agents when they are missing (`cbdi router --secrets-dir`)."""
     inside = RunSecrets(Path(SECRETS_IN_CONTAINER))
     env = {CREDENTIALS_ENV: str(inside.credentials(service))}
     if service == "router":
         env |= {"CBDI_USERS": str(inside.users), "CBDI_ACL": str(inside.acl)}
         if hub:
             env["CBDI_ZENOH_CONFIG"] = str(inside.hub)
+        agents = ",".join(f"{a.name}:{a.kind}" for a in scenario.agents)
+        env |= {"CBDI_SECRETS_DIR": SECRETS_IN_CONTAINER, "CBDI_SECRETS_AGENTS": agents}
     return env
+
+
+def compose_grants(agents: Sequence[tuple[str, str]]) -> list[Grant]:
+    """Return every identity of a compose run of `agents` (name, kind): `cbdi up`'s,
+    `wait`'s and the routers'."""
+    components = [(name, AGENT_KINDS[kind]) for name, kind in agents]
+    return [*grants(components), *COMPOSE_GRANTS]
 
 
 def write_secrets(scenario: Scenario, where: Path) -> bool:
     """Write the run's secrets in `where`, unless it holds every identity's already (the
     projects of a run split over hosts share one set); return whether it wrote them."""
-    agents = [(a.name, AGENT_KINDS[a.kind]) for a in scenario.agents]
-    everyone = [*grants(agents), *COMPOSE_GRANTS]
-    existing = RunSecrets(where)
-    have = existing.acl.is_file() and existing.hub.is_file()
-    if have and all(existing.credentials(g.identity).is_file() for g in everyone):
-        return False
-    create_secrets(where, everyone)
-    return True
+    return ensure_secrets(where, compose_grants([(a.name, a.kind) for a in scenario.agents]))
 
 
 def secrets_beside(secrets: str, output: str) -> Path:

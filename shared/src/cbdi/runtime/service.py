@@ -220,6 +220,7 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
     try:
         for s, log in zip(services, logs, strict=True):
             try:
+                await _credentials_made(s.settings, log)
                 bus = await open_bus(s.settings.bus_config())
             except CbdiError as exc:
                 log.error("bus_open_failed", error=str(exc))
@@ -252,6 +253,20 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.remove_signal_handler(sig)
     return next((ctx.exit_code for ctx in contexts if ctx.exit_code), 0)
+
+
+async def _credentials_made(settings: ServiceSettings, log: Log) -> None:
+    """Wait, as long as for the router, for a credentials file not there yet: in a
+    compose run the router makes them as it starts, beside its peers (an absent file
+    after that is refused by `bus_config`, naming it)."""
+    path = settings.credentials
+    if not path or os.path.exists(path):
+        return
+    log.info("waiting_for_credentials", path=path, timeout=settings.connect_timeout)
+    clock = WallClock()
+    deadline = clock.now() + settings.connect_timeout
+    while not os.path.exists(path) and clock.now() < deadline:
+        await clock.sleep(0.2)
 
 
 async def _host(ctx: ServiceContext, main: ServiceMain, others: Sequence[ServiceContext]) -> None:

@@ -11,6 +11,7 @@ from cbdi.security.secrets import (
     RunSecrets,
     create_secrets,
     discover,
+    ensure_secrets,
     read_credentials,
     run_dir,
 )
@@ -23,6 +24,7 @@ __all__ = [
     "acl_config",
     "create_secrets",
     "discover",
+    "ensure_secrets",
     "grants",
     "read_credentials",
     "run_dir",

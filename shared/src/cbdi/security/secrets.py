@@ -16,6 +16,7 @@ the operator's credentials of the run it talks to.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import json
 import os
 import re
@@ -35,6 +36,7 @@ __all__ = [
     "RunSecrets",
     "create_secrets",
     "discover",
+    "ensure_secrets",
     "read_credentials",
     "read_zenoh_settings",
     "run_dir",
@@ -43,6 +45,10 @@ __all__ = [
 CREDENTIALS_ENV = "CBDI_CREDENTIALS"
 RUNS_ENV = "CBDI_RUNS_DIR"  # where `cbdi up` keeps its runs' secrets (default below)
 _PORT = re.compile(r":(\d+)$")
+MAKE_SECRETS = (
+    "a run's secrets are made by `cbdi up`, by `cbdi compose` (beside the compose file) "
+    "or, in a compose run, by its router (docs/security.md)"
+)
 
 
 @dataclass(frozen=True)
@@ -116,6 +122,26 @@ def create_secrets(root: Path, all_grants: Sequence[Grant]) -> RunSecrets:
     return out
 
 
+def ensure_secrets(root: Path, all_grants: Sequence[Grant]) -> bool:
+    """Write the run's secrets in `root` unless it holds every grant's already; return
+    whether it wrote them. Under a lock: the routers of a run's compose projects, and
+    `cbdi compose`, may make them at once (the first writes, the others keep them)."""
+    root.mkdir(parents=True, exist_ok=True, mode=0o700)
+    with open(root / ".lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        have = RunSecrets(root)
+        files = [
+            have.acl,
+            have.hub,
+            have.users,
+            *(have.credentials(g.identity) for g in all_grants),
+        ]
+        if all(f.is_file() for f in files):
+            return False
+        create_secrets(root, all_grants)
+        return True
+
+
 def _zenoh_id() -> str:
     """A random Zenoh id (16 bytes in hex; no zero at either end, which Zenoh would not
     print back the same)."""
@@ -131,7 +157,7 @@ def read_credentials(path: str | Path) -> Credentials:
     try:
         data: Any = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise ConfigError(where, "credentials", "file not found") from None
+        raise ConfigError(where, "credentials", f"file not found; {MAKE_SECRETS}") from None
     except OSError as exc:
         raise ConfigError(where, "credentials", exc.strerror or str(exc)) from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
