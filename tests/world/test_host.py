@@ -2,7 +2,7 @@
 
 A request asked again (an executor that lost the reply with the killed world) is served
 once; a restarted world replays the steps and requests noted since the last whole save
-and publishes the epoch it reached only if that had not gone out.
+and publishes the epoch it reached again (in real time too: its outcomes are news).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from cbdi import keys
 from cbdi.bus import LogSink, MemoryBus, messages
 from cbdi.runtime.log import Log
 from cbdi.runtime.service import ServiceContext
-from cbdi.wire.world import ActionReply, ActionRequest, Tick
+from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, Tick
 from cbdi_world.recovery import Keeper
 from cbdi_world.service import WorldService, WorldSettings, build_world
 from tests_support import REPO
@@ -22,9 +22,17 @@ from tests_support import REPO
 MAP = str(REPO / "domains/recycling/maps/paper-7x7.toml")
 
 
-def host(state: Path, bus: MemoryBus, out: io.StringIO, restart: int = 0) -> WorldService:
+def host(
+    state: Path, bus: MemoryBus, out: io.StringIO, restart: int = 0, lockstep: bool = True
+) -> WorldService:
     settings = WorldSettings(
-        simulator="recycling", map=MAP, seed=1, state=str(state), state_every=5, restart=restart
+        simulator="recycling",
+        map=MAP,
+        seed=1,
+        state=str(state),
+        state_every=5,
+        restart=restart,
+        lockstep=lockstep,
     )
     ctx = ServiceContext("world", bus, Log("world", stream=out), settings)
     keeper = Keeper(state, ctx.log)
@@ -98,3 +106,27 @@ async def test_an_ack_seen_before_the_state_file_is_read_is_not_taken_back(
     assert world.acks.waiting_for(10, "done") == []  # caught up: not behind
     world.restore_marks({member: (12, done)}, {}, {})
     assert world.acks.acked[member] == (12, done)  # a later saved mark is taken
+
+
+async def test_a_real_time_world_killed_after_publishing_sends_that_epochs_outcomes_again(
+    tmp_path: Path,
+) -> None:
+    """Killed just after publishing (Zenoh may not have sent it yet), a real-time world
+    publishes that epoch again: the next epoch brings new percepts, but the outcome of an
+    action that ended in it comes only with it (its executor waited for good, seen under
+    load in tests/e2e/test_faults.py)."""
+    state, out = tmp_path / "world.state", io.StringIO()
+    first = host(state, MemoryBus(), out, lockstep=False)
+    await first.advance(first.world.initial())
+    x, y = first.world.agents["robot1"].cell  # type: ignore[attr-defined]
+    await first.on_act("act", move("robot1-1", (x + 1, y)))
+    await first.advance(first.world.step())  # the move ends: its outcome went out (lost)
+    bus = MemoryBus()
+    outcomes = messages(bus, keys.world_outcomes("robot1"), ActionOutcome, LogSink())
+    second = host(state, bus, out, restart=1, lockstep=False)
+    assert second.resumed is not None
+    result, published = second.resumed
+    assert (result.epoch, published) == (1, True)
+    await second.go_on(result, published)
+    _, outcome = await anext(outcomes)
+    assert (outcome.request_id, outcome.status, outcome.epoch) == ("robot1-1", "succeeded", 1)

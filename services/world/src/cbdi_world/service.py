@@ -11,8 +11,9 @@ With `--state FILE` it saves its state every epoch and notes every request it se
 it goes on from that file at the epoch it was killed in, without the start barrier: the
 members send their latest acks again when its liveliness token comes back
 (`cbdi.lockstep.announce_ready`), a request it already served (an executor asking
-again after losing the reply) gets the same reply, once, and in lockstep the epoch it
-was killed in goes out again (a member that had it takes the repeat as had).
+again after losing the reply) gets the same reply, once, and the epoch it was killed
+in goes out again (a member that had it takes the repeat as had; in real time, its
+outcomes may be all that tells an executor its running action ended).
 """
 
 from __future__ import annotations
@@ -259,12 +260,14 @@ class WorldService:
             saved=self.saved_at,
             published=published,
         )
-        # In lockstep it goes out again even if it went out: a crash right after the
-        # publication may lose what Zenoh had not sent yet, and every member waits for
-        # its percepts; a member that had it takes the repeat as had (`EpochGate`). In
-        # real time the next epoch comes anyway.
-        if not published or self.settings.lockstep:
-            await self.publish_epoch(result)
+        # It goes out again even if it went out: a crash right after the publication
+        # may lose what Zenoh had not sent yet. In lockstep every member waits for its
+        # percepts, and a member that had them takes the repeat as had (`EpochGate`). In
+        # real time the next epoch comes anyway, but the outcomes of this one do not:
+        # an executor would wait for good for the end of its running action (a member
+        # that had them ignores them: the step ended already).
+        await self.publish_epoch(result)
+        if not published:
             self.note(Published(result.epoch))
         await self.check_end()
 
