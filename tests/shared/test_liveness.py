@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cbdi.launcher.liveness import Frozen, Watchdog
+from cbdi.launcher.liveness import Frozen, Stall, Starved, Watchdog
 
 RUN = {"router": 10, "world": 11, "robot1/planner": 12}
 
@@ -19,15 +19,24 @@ def _beating(dog: Watchdog, until: float, services: dict[str, int], step: float 
 
 
 def _checks(
-    dog: Watchdog, start: float, end: float, running: dict[str, int] = RUN, beating: int = 2
-) -> list[Frozen]:
+    dog: Watchdog,
+    start: float,
+    end: float,
+    running: dict[str, int] = RUN,
+    beating: int = 2,
+    stalled: Stall | None = None,
+) -> list[Frozen | Starved]:
     """Check every tick from `start` to `end`, the first `beating` services of `running`
-    beating all along; return every verdict."""
-    found: list[Frozen] = []
+    beating all along (the rest, if `stalled`, sending that word every 0.5 s); return
+    every verdict."""
+    found: list[Frozen | Starved] = []
     t = start
     while t <= end + 1e-9:
         for service, pid in list(running.items())[:beating]:
             dog.beat(service, pid, t)
+        if stalled is not None and round(t * 10) % 5 == 0:
+            for service, pid in list(running.items())[beating:]:
+                dog.beat(service, pid, t, stalled)
         found += dog.check(t, running)
         t = round(t + 0.1, 3)
     return found
@@ -109,3 +118,46 @@ def test_a_freeze_is_reported_at_the_limit_and_killed_at_the_kill_limit() -> Non
     assert [f.kill for f in found] == [False]
     with pytest.raises(ValueError, match="kill limit"):
         Watchdog(2.0, 0.1, kill_after=1.0)
+
+
+STARVED = Stall(stalled_for=3.0, loop_cpu=0.05, wanted=1.4)  # waited for a CPU, loop idle
+
+
+def test_a_starved_process_is_reported_once_and_never_killed() -> None:
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, RUN)
+    found = _checks(dog, 3.1, 60.0, stalled=STARVED)
+    assert found == [Starved("robot1/planner", 12, found[0].stalled_for, 1.4)]
+    assert 1.9 <= found[0].stalled_for <= 2.0
+    dog.beat("robot1/planner", 12, 60.1)  # its loop turns again: a new stall is news
+    found = _checks(dog, 60.2, 64.0, stalled=STARVED)
+    assert [type(f) for f in found] == [Starved]
+
+
+@pytest.mark.parametrize(
+    "word",
+    [
+        Stall(stalled_for=3.0, loop_cpu=2.5, wanted=1.0),  # its loop's thread ran: held by code
+        Stall(stalled_for=3.0, loop_cpu=0.0, wanted=0.01),  # nobody wanted the CPU: asleep
+        Stall(stalled_for=3.0, loop_cpu=0.0, wanted=None),  # the system does not say
+    ],
+)
+def test_a_stalled_loop_that_is_not_starved_is_frozen_and_killed(word: Stall) -> None:
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, RUN)
+    found = _checks(dog, 3.1, 20.0, stalled=word)
+    assert [(type(f), f.service) for f in found] == [(Frozen, "robot1/planner")] * 2
+    assert [f.kill for f in found if isinstance(f, Frozen)] == [False, True]
+
+
+def test_a_starved_process_that_falls_silent_is_killed_at_the_kill_limit() -> None:
+    # Starved, then stopped (SIGSTOP): its last word goes stale, it is frozen after all.
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, RUN)
+    found = _checks(dog, 3.1, 8.0, stalled=STARVED)
+    found += _checks(dog, 8.1, 20.0)
+    assert [type(f) for f in found] == [Starved, Frozen, Frozen]
+    frozen = [f for f in found if isinstance(f, Frozen)]
+    assert [f.kill for f in frozen] == [False, True]
+    assert 6.9 <= frozen[0].silent_for <= 7.2  # once its last word (at 8) is stale
+    assert 9.9 <= frozen[1].silent_for <= 10.0

@@ -9,32 +9,58 @@ import time
 import pytest
 
 from cbdi.runtime.log import Log
-from cbdi.runtime.stall import Resumed, Stalled, StallJudge, watch_loop
+from cbdi.runtime.stall import Counters, Resumed, Stalled, StallJudge, watch_loop
+
+
+def _c(loop: float, process: float = 0.0, wanted: float | None = None) -> Counters:
+    return Counters(loop, process, wanted)
 
 
 def test_a_stall_is_reported_once_then_its_end_with_the_cpu_used() -> None:
     judge = StallJudge(1.0)
-    assert judge.check(now=10.5, turned=10.0, cpu=3.0) is None
-    assert judge.check(now=11.2, turned=10.0, cpu=3.2) == Stalled(1.2)
-    assert judge.check(now=15.0, turned=10.0, cpu=7.0) is None  # still the same stall
-    resumed = judge.check(now=16.1, turned=16.0, cpu=8.5)
+    assert judge.check(now=10.5, turned=10.0, clocks=_c(3.0)) is None
+    assert judge.check(now=11.2, turned=10.0, clocks=_c(3.2)) == Stalled(1.2, 0.2)
+    assert judge.check(now=15.0, turned=10.0, clocks=_c(7.0)) is None  # the same stall
+    resumed = judge.check(now=16.1, turned=16.0, clocks=_c(8.5))
     assert resumed == Resumed(6.0, 5.5)
     assert resumed.busy == pytest.approx(5.5 / 6.0)
-    assert judge.check(now=16.3, turned=16.2, cpu=8.6) is None
-    assert judge.check(now=17.5, turned=16.2, cpu=8.6) == Stalled(1.3)  # a new one
+    assert judge.check(now=16.3, turned=16.2, clocks=_c(8.6)) is None
+    assert judge.check(now=17.5, turned=16.2, clocks=_c(8.6)) == Stalled(1.3)  # a new one
 
 
 def test_a_starved_loop_is_told_from_a_busy_one() -> None:
     judge = StallJudge(0.5)
-    judge.check(now=2.0, turned=1.0, cpu=0.0)
-    assert judge.check(now=9.0, turned=8.9, cpu=0.4).busy == pytest.approx(0.4 / 7.9)
+    judge.check(now=2.0, turned=1.0, clocks=_c(0.0))
+    assert judge.check(now=9.0, turned=8.9, clocks=_c(0.4)).busy == pytest.approx(0.4 / 7.9)
 
 
 def test_another_thread_holding_the_interpreter_shows_in_the_process_cpu() -> None:
     judge = StallJudge(0.5)
-    judge.check(now=1.0, turned=1.0, cpu=2.0, process_cpu=5.0)
-    assert judge.check(now=2.0, turned=1.0, cpu=2.01, process_cpu=6.0) == Stalled(1.0)
-    assert judge.check(now=4.1, turned=4.0, cpu=2.02, process_cpu=8.0) == Resumed(3.0, 0.02, 3.0)
+    judge.check(now=1.0, turned=1.0, clocks=_c(2.0, 5.0))
+    assert judge.check(now=2.0, turned=1.0, clocks=_c(2.01, 6.0)) == Stalled(1.0, 0.01)
+    resumed = judge.check(now=4.1, turned=4.0, clocks=_c(2.02, 8.0))
+    assert resumed == Resumed(3.0, 0.02, 3.0)
+
+
+def test_a_lasting_stall_is_told_every_period_with_the_share_the_process_wanted() -> None:
+    judge = StallJudge(1.0, every=0.5)
+    assert judge.check(now=0.9, turned=0.0, clocks=_c(1.0, 1.0, 10.0)) is None
+    first = judge.check(now=1.1, turned=0.0, clocks=_c(1.0, 1.1, 10.3))
+    assert first == Stalled(1.1, 0.0, 1.5, first=True)  # 0.3 s wanted over 0.2 s
+    assert judge.check(now=1.4, turned=0.0, clocks=_c(1.0, 1.2, 10.6)) is None
+    again = judge.check(now=1.6, turned=0.0, clocks=_c(1.01, 1.3, 11.4))
+    assert again == Stalled(1.6, 0.01, 2.0, first=False)  # 1.4 s over 0.7 s: starved
+    resumed = judge.check(now=1.9, turned=1.8, clocks=_c(1.02, 1.4, 12.3))
+    assert resumed == Resumed(1.8, 0.02, 0.4, 2.3)
+
+
+def test_an_asleep_process_wants_no_cpu_and_an_unknown_share_stays_unknown() -> None:
+    judge = StallJudge(1.0, every=0.5)
+    judge.check(now=0.9, turned=0.0, clocks=_c(1.0, 1.0, 10.0))
+    assert judge.check(now=1.9, turned=0.0, clocks=_c(1.0, 1.0, 10.0)).wanted == 0.0
+    judge = StallJudge(1.0, every=0.5)
+    judge.check(now=0.9, turned=0.0, clocks=_c(1.0))  # no schedstat on this system
+    assert judge.check(now=1.9, turned=0.0, clocks=_c(1.0)).wanted is None
 
 
 @pytest.mark.parametrize("limit", [0.0, -1.0, float("nan"), float("inf")])

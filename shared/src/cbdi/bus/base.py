@@ -69,6 +69,12 @@ class Bus(Protocol):
         """Publish `payload` on `key`; `block` (commands, plans) never drops under load."""
         ...
 
+    def pulse(self, key: str, payload: bytes) -> None:
+        """Publish `payload` on `key` now, from any thread, even while the event loop
+        stands; best effort (dropped under congestion), neither counted in `sent` nor
+        kept for late joiners: for liveness signals (a stalled loop's heartbeat) only."""
+        ...
+
     def subscribe(self, key_expr: str | Sequence[str], *, history: bool = False) -> Subscription:
         """Subscribe to one or several key expressions (wildcards allowed) in one queue.
 

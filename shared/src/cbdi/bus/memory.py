@@ -8,6 +8,7 @@ immediate and in publication order. Key matching uses Zenoh's own key expression
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
 from collections import Counter
 from collections.abc import AsyncIterator, Sequence
@@ -56,6 +57,10 @@ class _MemorySubscription:
     def __init__(self, network: MemoryNetwork, key_exprs: Sequence[str]) -> None:
         self.key_exprs = list(key_exprs)
         self.queue: asyncio.Queue[Sample | None] = asyncio.Queue()
+        try:  # where a pulse from another thread is handed over
+            self.loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
+        except RuntimeError:
+            self.loop = None
         self._network = network
         network.subscribers.append(self)
 
@@ -109,6 +114,19 @@ class MemoryBus:
         for sub in list(self.network.subscribers):
             if any(_matches(expr, key) for expr in sub.key_exprs):
                 sub.queue.put_nowait(sample)
+
+    def pulse(self, key: str, payload: bytes) -> None:
+        if self._closed:
+            return
+        sample = Sample(key, bytes(payload), 0, time.time_ns(), 0)
+        for sub in list(self.network.subscribers):
+            if not any(_matches(expr, key) for expr in sub.key_exprs):
+                continue
+            if sub.loop is None:
+                sub.queue.put_nowait(sample)
+            else:
+                with contextlib.suppress(RuntimeError):  # its loop closed: nobody listens
+                    sub.loop.call_soon_threadsafe(sub.queue.put_nowait, sample)
 
     def subscribe(
         self, key_expr: str | Sequence[str], *, history: bool = False

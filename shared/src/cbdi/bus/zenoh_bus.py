@@ -274,6 +274,12 @@ class ZenohBus:
         self.published += 1
         publisher.put(payload, attachment=stamp(seq, self.published))
 
+    def pulse(self, key: str, payload: bytes) -> None:
+        if self._closed:
+            return
+        with contextlib.suppress(zenoh.ZError):  # closing meanwhile: a pulse is worth nothing
+            self.session.put(key, payload, congestion_control=zenoh.CongestionControl.DROP)
+
     def _declare_querier(self, key: str, timeout: float) -> Any:
         """Declare (and cache) a querier for `key`: repeated requests skip declaration."""
         if len(self._queriers) >= _MAX_PUBLISHERS:

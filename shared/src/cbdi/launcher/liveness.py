@@ -7,9 +7,20 @@ default). Its heartbeat comes from a task of its event loop (`cbdi.runtime.servi
 so it stops with the loop. A service is frozen when its current process, once heard,
 has been silent so long that, checked every `tick` seconds, it is found within `limit`
 seconds of its last heartbeat (so within `limit` of freezing): reported. Still silent at
-`kill_after` seconds, it is killed (and restarted by policy): a service merely starved of
-the CPU for a moment on a loaded machine is reported, not killed. A planner searching in
+`kill_after` seconds, it is killed (and restarted by policy). A planner searching in
 worker threads keeps its loop free and beating, so it is never taken for frozen.
+
+A service whose loop stands while its process lives says so: the process's stall
+watcher (`cbdi.runtime.stall`) sends its heartbeat from its own thread with the evidence
+(`Stall`). A process that wanted the CPU most of the time (`wanted` >= `STARVED`) while
+its loop's thread ran less than the limit in CPU time is **starved**: a loaded machine
+gave it too little, it is slow, not frozen, so it is reported once (`Starved`) and never
+killed while that lasts. A loop whose own thread ran the limit's worth of CPU without a
+turn is held by code (frozen, whatever the load); a process neither running nor waiting
+for a CPU is asleep (a deadlock, a blocking call): frozen too. A process that sends
+nothing at all (stopped, or a thread holding the interpreter) is frozen. Evidence counts
+only while fresh (heard within the limit): a stopped process's last word does not
+shield it.
 
 Two silences are not a service's fault, and judge nobody:
 - the watchdog itself was late by more than half the limit (its own loop starved on a
@@ -27,9 +38,36 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-__all__ = ["Frozen", "Watchdog"]
+__all__ = ["STARVED", "Frozen", "Stall", "Starved", "Watchdog"]
 
 ROUTER = "router"
+STARVED = 0.5  # a process whose threads wanted the CPU this share of a stall is starved
+
+
+@dataclass(frozen=True)
+class Stall:
+    """A process's word that its loop has not turned for `stalled_for` s: its thread ran
+    `loop_cpu` s meanwhile, its threads wanted the CPU `wanted` of the time (None:
+    unknown)."""
+
+    stalled_for: float
+    loop_cpu: float
+    wanted: float | None
+
+    def starved(self, limit: float) -> bool:
+        """True if the process waited for the CPU, its loop not held by code."""
+        return self.wanted is not None and self.wanted >= STARVED and self.loop_cpu < limit
+
+
+@dataclass(frozen=True)
+class Starved:
+    """The decision that process `pid` of `service` is starved, not frozen: its loop has
+    stood `stalled_for` s while its threads wanted the CPU `wanted` of the time."""
+
+    service: str
+    pid: int
+    stalled_for: float
+    wanted: float
 
 
 @dataclass(frozen=True)
@@ -67,12 +105,27 @@ class Watchdog:
         self._heard: dict[str, tuple[int, float]] = {}  # service -> (pid, last beat)
         self._judged: set[tuple[str, int]] = set()
         self._checked: float | None = None
+        self._stalls: dict[str, tuple[int, float, Stall]] = {}  # service -> (pid, heard, word)
+        self._starved: set[tuple[str, int]] = set()  # reported starved in this silence
 
-    def beat(self, service: str, pid: int, now: float) -> None:
-        """Note a heartbeat of process `pid` of `service` heard at `now`."""
+    def beat(self, service: str, pid: int, now: float, stall: Stall | None = None) -> None:
+        """Note a heartbeat of process `pid` of `service` heard at `now`: from its loop,
+        or (`stall`) from its stall watcher while its loop stands."""
+        if stall is not None:
+            self._stalls[service] = (pid, now, stall)
+            return
         self._heard[service] = (pid, now)
+        self._stalls.pop(service, None)
+        self._starved.discard((service, pid))
 
-    def check(self, now: float, running: Mapping[str, int]) -> list[Frozen]:
+    def _starving(self, service: str, pid: int, now: float) -> Stall | None:
+        """The fresh word of `service`'s process `pid` that it is starved, if any."""
+        word = self._stalls.get(service)
+        if word is None or word[0] != pid or now - word[1] > self.limit:
+            return None
+        return word[2] if word[2].starved(self.limit) else None
+
+    def check(self, now: float, running: Mapping[str, int]) -> list[Frozen | Starved]:
         """Return the services of `running` (service -> current pid) newly judged frozen.
 
         A service is watched once its current process beat; one that never beats is
@@ -83,6 +136,7 @@ class Watchdog:
         self._checked = now
         if late:
             self._heard = {s: (pid, now) for s, (pid, _) in self._heard.items()}
+            self._stalls = {s: (pid, now, w) for s, (pid, _, w) in self._stalls.items()}
             self._seen = {p: now for p in self._seen}
             return []
         for process in running.items():
@@ -100,9 +154,16 @@ class Watchdog:
                 mute.add(s)
         if len(watched) > 1 and len(silent) == len(watched):
             silent = {s: t for s, t in silent.items() if s == ROUTER}
-        found = []
+        found: list[Frozen | Starved] = []
         for s, t in sorted(silent.items()):
             process = (s, running[s])
+            starving = None if s in mute else self._starving(s, running[s], now)
+            if starving is not None:
+                if process not in self._starved:
+                    self._starved.add(process)
+                    wanted = starving.wanted or 0.0
+                    found.append(Starved(s, running[s], round(t, 3), round(wanted, 3)))
+                continue
             kill = s in mute or t > self.kill_after - self.tick
             if process in self._killed or (process in self._judged and not kill):
                 continue

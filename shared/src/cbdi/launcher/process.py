@@ -90,6 +90,7 @@ class ManagedProcess:
         self.proc: asyncio.subprocess.Process | None = None
         self.restarts = 0
         self.freezes = 0
+        self.starved = 0  # times its loop stood for want of CPU (reported, not killed)
         self.exit_codes: list[int] = []
         self.tail: deque[str] = deque(maxlen=20)
         self.stopping = False

@@ -187,6 +187,7 @@ async def _launch(
     for proc in procs:
         summary.restarts[proc.spec.service] = proc.restarts
         summary.freezes[proc.spec.service] = proc.freezes
+        summary.starved[proc.spec.service] = proc.starved
         summary.exit_codes[proc.spec.service] = proc.exit_codes
     return summary
 

@@ -32,6 +32,8 @@ class RunSummary:
     stats: dict[str, Any] = field(default_factory=dict)
     restarts: dict[str, int] = field(default_factory=dict)
     freezes: dict[str, int] = field(default_factory=dict)  # processes killed as frozen
+    # times a process's loop stood for want of CPU: reported, not killed (slow, not frozen)
+    starved: dict[str, int] = field(default_factory=dict)
     exit_codes: dict[str, list[int]] = field(default_factory=dict)
     planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
     # Per agent: `actions` it asked the world for and the simulated time of the first.

@@ -5,7 +5,9 @@ hears on `cbdi/heartbeat/**` with the wall clock, and acts on each `Frozen`: a l
 (`frozen service=... pid=... silent_for=... action=report|kill`) and a `ServiceFrozen`
 message on `cbdi/launcher/health` (which the monitor records); at the kill limit also
 SIGKILL, after which the service's supervisor restarts it by its restart policy, as after
-a crash.
+a crash. On each `Starved`: a log line (`starved service=... pid=... stalled_for=...
+wanted=... action=none`), a `ServiceStarved` message there too, and a count in the run's
+summary (`starved`); nothing is killed.
 """
 
 from __future__ import annotations
@@ -16,9 +18,9 @@ from cbdi import keys
 from cbdi.bus import LogSink, messages, publish
 from cbdi.bus.base import Bus
 from cbdi.clock import Clock, WallClock
-from cbdi.launcher.liveness import Frozen, Watchdog
+from cbdi.launcher.liveness import Frozen, Stall, Starved, Watchdog
 from cbdi.launcher.process import ManagedProcess
-from cbdi.wire.common import Heartbeat, ServiceFrozen
+from cbdi.wire.common import Heartbeat, ServiceFrozen, ServiceStarved
 
 __all__ = ["TICK", "watch_heartbeats", "watch_processes"]
 
@@ -32,7 +34,10 @@ async def watch_heartbeats(bus: Bus, dog: Watchdog, clock: Clock | None = None) 
         bus, keys.HEARTBEAT_ALL, Heartbeat, LogSink()
     )
     async for _, beat in beats:
-        dog.beat(beat.service, beat.pid, clock.now())
+        stall = None
+        if beat.stalled_for > 0:
+            stall = Stall(beat.stalled_for, beat.loop_cpu, beat.wanted)
+        dog.beat(beat.service, beat.pid, clock.now(), stall)
 
 
 async def watch_processes(
@@ -51,7 +56,10 @@ async def watch_processes(
             await _act(bus, dog, by_service[frozen.service], frozen)
 
 
-async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen) -> None:
+async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen | Starved) -> None:
+    if isinstance(frozen, Starved):
+        await _starved(bus, proc, frozen)
+        return
     if frozen.kill:
         if not proc.kill_frozen(frozen.pid):
             return
@@ -66,5 +74,23 @@ async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen) ->
     )
     report = ServiceFrozen(
         service=frozen.service, pid=frozen.pid, silent_for=frozen.silent_for, limit=limit
+    )
+    await publish(bus, keys.launcher_stream("health"), report, block=True)
+
+
+async def _starved(bus: Bus, proc: ManagedProcess, starved: Starved) -> None:
+    if not proc.running or proc.pid != starved.pid:
+        return
+    proc.starved += 1
+    proc.sink(
+        "launcher",
+        f"starved service={starved.service} pid={starved.pid}"
+        f" stalled_for={starved.stalled_for:.2f} wanted={starved.wanted:.2f} action=none",
+    )
+    report = ServiceStarved(
+        service=starved.service,
+        pid=starved.pid,
+        stalled_for=starved.stalled_for,
+        wanted=min(starved.wanted, 4096.0),
     )
     await publish(bus, keys.launcher_stream("health"), report, block=True)

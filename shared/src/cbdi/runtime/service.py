@@ -34,7 +34,7 @@ from cbdi.runtime.fault import Fault, parse_faults, planned_fault, strike
 from cbdi.runtime.life import end_cleanly
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent
-from cbdi.runtime.stall import watch_loop
+from cbdi.runtime.stall import Stalled, watch_loop
 from cbdi.security.secrets import read_credentials, read_zenoh_settings
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
@@ -241,8 +241,12 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
 
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop)
-    limit = services[0].settings.stall_limit
-    watch = loop.create_task(watch_loop(logs[0], limit), name="stall-watch") if limit else None
+    limit, beat = services[0].settings.stall_limit, services[0].settings.heartbeat
+    watch = None
+    if limit:
+        pulse = _stall_pulse(contexts) if beat > 0 else None
+        watcher = watch_loop(logs[0], limit, pulse=pulse, every=beat or None)
+        watch = loop.create_task(watcher, name="stall-watch")
     try:
         async with asyncio.TaskGroup() as tg:
             for ctx, s in zip(contexts, services, strict=True):
@@ -253,6 +257,26 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.remove_signal_handler(sig)
     return next((ctx.exit_code for ctx in contexts if ctx.exit_code), 0)
+
+
+def _stall_pulse(contexts: Sequence[ServiceContext]) -> Callable[[Stalled], None]:
+    """Send each service's heartbeat with the evidence of a stall, from the watcher's
+    thread: the watchdog hears the process while its loop stands (see `Heartbeat`)."""
+    pid = os.getpid()
+
+    def pulse(stall: Stalled) -> None:
+        for ctx in contexts:
+            beat = Heartbeat(
+                service=ctx.service,
+                pid=pid,
+                beat=0,
+                stalled_for=stall.silent_for,
+                loop_cpu=stall.loop_cpu,
+                wanted=None if stall.wanted is None else min(stall.wanted, 4096.0),
+            )
+            ctx.bus.pulse(keys.heartbeat(ctx.service), encode(beat))
+
+    return pulse
 
 
 async def _credentials_made(settings: ServiceSettings, log: Log) -> None:

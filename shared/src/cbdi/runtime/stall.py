@@ -1,52 +1,78 @@
-"""Which code stalls a service's event loop, named in its log while it happens.
+"""Which code stalls a service's event loop, named in its log while it happens, and
+whether the process was starved of the CPU or stuck, told to the watchdog.
 
-A loop that does not turn sends no heartbeat, so the launcher's watchdog reports the
-service frozen and later kills it. Whether the loop's own thread was busy (some code
-held it: a bug, and this names the code) or the process got no CPU (a loaded machine:
-slow, not frozen) is told apart by the loop thread's CPU time over the stall.
+A loop that does not turn sends no heartbeat, so the launcher's watchdog would report
+the service frozen and later kill it. Whether the loop's own thread was busy (some code
+held it: a bug, and this names the code), the process was asleep (a deadlock, a blocking
+call) or the process wanted the CPU and the machine gave it none (a loaded machine:
+slow, not frozen) is told apart by the process's own scheduler counters over the stall.
 
 A task of the loop marks each turn; a daemon thread looks every `period` wall seconds.
 When the loop has not turned for `limit` seconds it logs `loop_stalled` once, with where
-the loop's thread is (its innermost frames); when the loop turns again it logs
-`loop_resumed` with how long it stood and how much CPU its thread used meanwhile
-(`busy`: the share of the stall it ran) and the whole process (`process_cpu`: when it
-far exceeds `cpu`, another thread of the process held the interpreter; when both are
-near 0, the machine gave the process no CPU). The decisions are `StallJudge`'s (pure); the
-shell reads the clocks and the frames.
+the loop's thread is (its innermost frames); while the stall lasts it hands the evidence
+(`Stalled`) to `pulse` every `every` seconds (the service shell sends it as a heartbeat
+from this thread, so the watchdog hears a starved process whose loop stands); when the
+loop turns again it logs `loop_resumed` with how long it stood and how much CPU its
+thread used meanwhile (`busy`: the share of the stall it ran), the whole process
+(`process_cpu`: when it far exceeds `cpu`, another thread of the process held the
+interpreter) and `wanted`: the share of the stall the process's threads ran or waited,
+runnable, for a CPU (Linux's `/proc/self/task/*/schedstat`; at least 1: some thread of
+the process wanted the CPU all along, so the machine starved it; near 0: it was asleep).
+The decisions are `StallJudge`'s (pure); the shell reads the clocks and the frames.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import os
 import sys
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from cbdi.runtime.log import Log
 
-__all__ = ["Resumed", "StallJudge", "Stalled", "watch_loop"]
+__all__ = ["Counters", "Resumed", "StallJudge", "Stalled", "read_counters", "watch_loop"]
 
 FRAMES = 6  # innermost frames of the loop's thread named in `loop_stalled`
 
 
 @dataclass(frozen=True)
+class Counters:
+    """A process's cumulative clocks, in seconds: the CPU its loop's thread ran, the CPU
+    all its threads ran, and what they ran plus waited runnable for a CPU (`wanted`;
+    None where the system does not say)."""
+
+    loop_cpu: float = 0.0
+    process_cpu: float = 0.0
+    wanted: float | None = None
+
+
+@dataclass(frozen=True)
 class Stalled:
-    """The loop has not turned for `silent_for` s (reported once per stall)."""
+    """The loop has not turned for `silent_for` s; since the stall was found its thread
+    ran `loop_cpu` s and the process's threads wanted the CPU `wanted` of the time
+    (None: unknown). `first`: the stall was just found (logged once)."""
 
     silent_for: float
+    loop_cpu: float = 0.0
+    wanted: float | None = None
+    first: bool = True
 
 
 @dataclass(frozen=True)
 class Resumed:
     """The loop turned again after a reported stall of `stood` s; its thread ran `cpu` s,
-    the whole process `process_cpu` s (other threads: the rest)."""
+    the whole process `process_cpu` s (other threads: the rest), and the process's
+    threads wanted the CPU `wanted` of the time (None: unknown)."""
 
     stood: float
     cpu: float
     process_cpu: float = 0.0
+    wanted: float | None = None
 
     @property
     def busy(self) -> float:
@@ -54,37 +80,63 @@ class Resumed:
         return min(1.0, self.cpu / self.stood) if self.stood > 0 else 0.0
 
 
-class StallJudge:
-    """Decide, from the loop's last turn and its thread's CPU clock, when it stalled."""
+def _share(now: float, then: float, since: float) -> float | None:
+    return None if since <= 0 else round(max(0.0, now - then) / since, 3)
 
-    def __init__(self, limit: float) -> None:
+
+class StallJudge:
+    """Decide, from the loop's last turn and the process's clocks, when it stalled."""
+
+    def __init__(self, limit: float, every: float | None = None) -> None:
         if not (math.isfinite(limit) and limit > 0):
             raise ValueError(f"stall limit must be a finite number > 0, got {limit}")
+        if every is not None and not (math.isfinite(every) and every > 0):
+            raise ValueError(f"stall report period must be a finite number > 0, got {every}")
         self.limit = limit
-        # (last turn, the loop thread's and the process's CPU then) of a stall
-        self._since: tuple[float, float, float] | None = None
-        self._cpu: tuple[float, float] | None = None  # the CPU clocks at the last check
+        self.every = every
+        # the stall: (its last turn, the clocks at the check before it was found and when)
+        self._since: tuple[float, Counters, float] | None = None
+        self._last: tuple[Counters, float] | None = None  # the clocks at the last check
+        self._told = 0.0  # when the stall was last reported
 
-    def check(
-        self, now: float, turned: float, cpu: float, process_cpu: float = 0.0
-    ) -> Stalled | Resumed | None:
-        """Judge at `now` a loop last seen turning at `turned`, its thread's CPU clock at
-        `cpu`, the process's at `process_cpu`."""
+    def check(self, now: float, turned: float, clocks: Counters) -> Stalled | Resumed | None:
+        """Judge at `now` a loop last seen turning at `turned`, the clocks at `clocks`."""
         if self._since is not None and turned > self._since[0]:
-            last, cpu_then, process_then = self._since
+            last, then, at = self._since
             self._since = None
+            wanted = None
+            if clocks.wanted is not None and then.wanted is not None:
+                wanted = _share(clocks.wanted, then.wanted, now - at)
             return Resumed(
                 round(turned - last, 3),
-                round(max(0.0, cpu - cpu_then), 3),
-                round(max(0.0, process_cpu - process_then), 3),
+                round(max(0.0, clocks.loop_cpu - then.loop_cpu), 3),
+                round(max(0.0, clocks.process_cpu - then.process_cpu), 3),
+                wanted,
             )
-        if self._since is None and now - turned > self.limit:
-            then = (cpu, process_cpu) if self._cpu is None else self._cpu
-            self._since = (turned, *then)
-            return Stalled(round(now - turned, 3))
         if self._since is None:
-            self._cpu = (cpu, process_cpu)
+            if now - turned <= self.limit:
+                self._last = (clocks, now)
+                return None
+            then, at = self._last if self._last is not None else (clocks, now)
+            self._since = (turned, then, at)
+            self._told = now
+            return self._stalled(now, turned, clocks, first=True)
+        turned_at, then, at = self._since
+        if then.wanted is None and clocks.wanted is not None:  # measured from now on
+            self._since = (turned_at, Counters(then.loop_cpu, then.process_cpu, clocks.wanted), now)
+        if self.every is not None and now - self._told >= self.every:
+            self._told = now
+            return self._stalled(now, turned, clocks, first=False)
         return None
+
+    def _stalled(self, now: float, turned: float, clocks: Counters, first: bool) -> Stalled:
+        assert self._since is not None
+        _, then, at = self._since
+        wanted = None
+        if clocks.wanted is not None and then.wanted is not None:
+            wanted = _share(clocks.wanted, then.wanted, now - at)
+        loop_cpu = round(max(0.0, clocks.loop_cpu - then.loop_cpu), 3)
+        return Stalled(round(now - turned, 3), loop_cpu, wanted, first)
 
 
 def _where(thread: int) -> str:
@@ -102,24 +154,63 @@ def _cpu_clock(thread: int) -> int | None:
         return None
 
 
-async def watch_loop(log: Log, limit: float, period: float = 0.1) -> None:
-    """Mark the loop's turns every `period` s; a daemon thread logs its stalls."""
-    judge = StallJudge(limit)
+_TASKS = "/proc/self/task"
+
+
+def _wanted() -> float | None:
+    """All threads' CPU plus run-queue wait, in seconds (Linux schedstat); None if unknown.
+
+    Threads that ended take their share with them: a judge takes no negative difference.
+    """
+    try:
+        tids = os.listdir(_TASKS)
+    except OSError:
+        return None
+    total = 0
+    for tid in tids:
+        try:
+            with open(f"{_TASKS}/{tid}/schedstat", "rb") as f:
+                ran, waited, _ = f.read().split()
+        except (OSError, ValueError):  # the thread ended meanwhile, or no schedstat
+            continue
+        total += int(ran) + int(waited)
+    return total / 1e9 if total else None
+
+
+def read_counters(loop_clock: int | None, wanted: bool = True) -> Counters:
+    """The process's clocks now; `loop_clock` is the loop thread's CPU clock id; `wanted`
+    (a file per thread) is read only when asked."""
+    loop_cpu = time.clock_gettime(loop_clock) if loop_clock is not None else 0.0
+    return Counters(loop_cpu, time.process_time(), _wanted() if wanted else None)
+
+
+async def watch_loop(
+    log: Log,
+    limit: float,
+    period: float = 0.1,
+    pulse: Callable[[Stalled], None] | None = None,
+    every: float | None = None,
+) -> None:
+    """Mark the loop's turns every `period` s; a daemon thread logs its stalls and hands
+    the evidence to `pulse` (called in that thread) every `every` s while one lasts."""
+    judge = StallJudge(limit, every if pulse is not None else None)
     loop_thread = threading.get_ident()
     clock = _cpu_clock(loop_thread)
     turned = [time.monotonic()]
     done = threading.Event()
 
-    def cpu() -> float:
-        return time.clock_gettime(clock) if clock is not None else 0.0
-
     def watch() -> None:
         while not done.wait(period):
-            decision = judge.check(time.monotonic(), turned[0], cpu(), time.process_time())
+            now = time.monotonic()
+            near = now - turned[0] > limit / 2  # a stall may come: read what it will need
+            decision = judge.check(now, turned[0], read_counters(clock, near))
             if isinstance(decision, Stalled):
-                log.warning(
-                    "loop_stalled", silent_for=decision.silent_for, where=_where(loop_thread)
-                )
+                if decision.first:
+                    log.warning(
+                        "loop_stalled", silent_for=decision.silent_for, where=_where(loop_thread)
+                    )
+                if pulse is not None:
+                    pulse(decision)
             elif isinstance(decision, Resumed):
                 log.warning(
                     "loop_resumed",
@@ -127,6 +218,7 @@ async def watch_loop(log: Log, limit: float, period: float = 0.1) -> None:
                     cpu=decision.cpu,
                     process_cpu=decision.process_cpu,
                     busy=f"{decision.busy:.2f}",
+                    wanted="unknown" if decision.wanted is None else f"{decision.wanted:.2f}",
                 )
 
     threading.Thread(target=watch, name="stall-watch", daemon=True).start()

@@ -18,6 +18,8 @@ __all__ = [
     "RunLaunched",
     "ServiceFrozen",
     "ServiceHealth",
+    "ServiceStarved",
+    "Share",
 ]
 
 
@@ -81,17 +83,40 @@ class ServiceHealth(Message, frozen=True, tag="cbdi.ServiceHealth/1"):
     alive_now: Many[Text]
 
 
+Share = Annotated[float, msgspec.Meta(ge=0.0, le=4096.0)]  # of a time, summed over threads
+
+
 class Heartbeat(Message, frozen=True, tag="cbdi.Heartbeat/1"):
     """Say that a service's event loop still turns: sent every `--heartbeat` wall seconds.
 
     From a task of the loop, so a blocked loop or a stopped process falls silent while
     its Zenoh session (and liveliness token) may live on. Wall-clock by nature, it
     never enters a lockstep epoch. `pid` tells one start of a service from the next.
+
+    While the loop stands (`cbdi.runtime.stall`), the process's stall watcher sends it
+    from its own thread instead, with the evidence: the loop has not turned for
+    `stalled_for` s (0: sent by the loop), its thread ran `loop_cpu` s meanwhile, and the
+    process's threads ran or waited runnable for a CPU `wanted` of the time (None:
+    unknown). A process that wanted the CPU and got little is starved, not frozen.
     """
 
     service: Symbol
     pid: Count
     beat: Count
+    stalled_for: NonNegative = 0.0
+    loop_cpu: NonNegative = 0.0
+    wanted: Share | None = None
+
+
+class ServiceStarved(Message, frozen=True, tag="cbdi.ServiceStarved/1"):
+    """The launcher's word that a service's loop has not turned for `stalled_for` wall
+    seconds because its process got too little CPU (its threads wanted it `wanted` of
+    the time): slow, not frozen, so it is not killed."""
+
+    service: Symbol
+    pid: Count
+    stalled_for: NonNegative
+    wanted: Share
 
 
 class ServiceFrozen(Message, frozen=True, tag="cbdi.ServiceFrozen/1"):
