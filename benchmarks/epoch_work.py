@@ -104,7 +104,7 @@ async def run(args: argparse.Namespace, times: Times, sizes: list[int]) -> RunFi
         seed=args.seed,
         max_time=args.until,
         member=members,
-        spawn=0.0,
+        option=("spawn=0.0",),
     )
     world = TogetherService("world", settings, world_main(build_world(settings), ManualClock()))
     services = [world]

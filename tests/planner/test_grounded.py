@@ -63,17 +63,17 @@ def test_a_robot_or_a_person_moving_reuses_the_grounding() -> None:
     assert (g.grounded, g.reused) == (1, 3)
 
 
-def test_a_new_object_a_new_goal_or_a_cell_never_seen_free_grounds_again() -> None:
+def test_a_new_object_or_a_cell_never_seen_free_grounds_again_a_new_goal_does_not() -> None:
     g = seen(beliefs(taken=("c_3_2",)))  # c_3_2 never seen free
     g.task(beliefs(taken=("c_3_2",)), GOAL)
-    g.task(beliefs(taken=("c_3_2",), litter=2), GOAL)  # a new item: a new object
+    first = g.task(beliefs(taken=("c_3_2",), litter=2), GOAL)  # a new item: a new object
     assert g.grounded == 2
-    g.task(beliefs(taken=("c_3_2",), litter=2), [["recycled", "p2"]])  # a new goal
-    assert g.grounded == 3
+    other = g.task(beliefs(taken=("c_3_2",), litter=2), [["recycled", "p2"]])  # a new goal
+    assert g.grounded == 2 and other.actions is first.actions and other.goal != first.goal
     b = beliefs(litter=2)  # c_3_2 free for the first time: its moves were never grounded
     g.transients.see(b)
     task = g.task(b, [["recycled", "p2"]])
-    assert g.grounded == 4
+    assert g.grounded == 3
     fresh = ground(DOMAIN, problem_from_beliefs(DOMAIN, b, [["recycled", "p2"]]))
     assert {a.name for a in fresh.actions} <= {a.name for a in task.actions}
 
@@ -113,3 +113,35 @@ def test_a_goal_unreachable_from_the_beliefs_is_told_and_blocked_if_people_move(
     assert not reaches_goal(task)
     assert g.blocked(b, GOAL) is True
     assert reaches_goal(g.task(beliefs("c_0_1"), GOAL))
+
+
+def test_a_task_aimed_at_another_goal_is_the_fresh_grounding_of_that_goal() -> None:
+    """Grounding runs from the initial state, so the cached task aimed at another goal
+    has the fresh task's facts, goal and heuristic value, and plans the same; a goal
+    that can never hold is told as grounding tells it."""
+    from cbdi_planner.errors import Unsolvable
+
+    g = seen(beliefs(litter=2))
+    b = beliefs(litter=2)
+    g.task(b, GOAL)
+    goals = [[["recycled", "p2"]], [["in", "robot1", "c_3_0"]], [["holding", "robot1", "p1"]]]
+    goals += [[["recycled", "p1"], ["recycled", "p2"]], GOAL]
+    for goal in goals:
+        task = g.task(b, goal)
+        fresh = ground(DOMAIN, problem_from_beliefs(DOMAIN, b, goal))
+        assert task.facts == fresh.facts
+        names = set(fresh.fact_names(fresh.goal))
+        assert set(task.fact_names(task.goal)) == names and task.goal_neg == fresh.goal_neg
+        h = RelaxedPlanGraph.of(task).estimate(initial_state(task)).value
+        assert h == RelaxedPlanGraph(fresh).estimate(initial_state(fresh)).value
+        mine = search(task, strategy="ff", budget=Budget(max_expansions=5000)).plan
+        alone = search(fresh, strategy="ff", budget=Budget(max_expansions=5000)).plan
+        assert mine is not None and alone is not None
+        assert [a.name for a in mine.actions] == [a.name for a in alone.actions]
+    assert g.grounded == 1
+    try:
+        g.task(b, [["bin_pose", "bin1", "c_3_3"]])  # a static fact that is false
+    except Unsolvable as exc:
+        assert "can never hold" in str(exc)
+    else:
+        raise AssertionError("a goal that can never hold was not told")

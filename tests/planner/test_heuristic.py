@@ -154,9 +154,10 @@ def test_feature_estimates_match_the_reference(
     _assert_same(monkeypatch, _text(domain_text, problem_text), least=10)
 
 
-def test_a_graph_is_built_once_for_tasks_that_differ_only_in_their_facts() -> None:
+def test_a_graph_is_built_once_for_tasks_that_differ_only_in_their_facts_or_goal() -> None:
     """`RelaxedPlanGraph.of`: a planner's per-epoch task reuses the operators built for
-    an earlier one of the same grounding, and estimates exactly as a graph built anew."""
+    an earlier one of the same grounding, whatever its initial state and goal, and
+    estimates exactly as a graph built anew."""
     task = _recycling("warehouse-15x15")
     rng = random.Random(7)
     first = RelaxedPlanGraph.of(task)
@@ -167,5 +168,11 @@ def test_a_graph_is_built_once_for_tasks_that_differ_only_in_their_facts() -> No
     assert again.estimate(state) == RelaxedPlanGraph(moved).estimate(state)
     again.aim(0)  # one copy's goal is its own
     assert first.goal == RelaxedPlanGraph(task).goal
-    other = replace(task, goal=task.goal & (task.goal - 1))  # another goal: another graph
-    assert RelaxedPlanGraph.of(other).ops is not first.ops
+    other = replace(task, goal=task.goal & (task.goal - 1))  # another goal: the same ops
+    aimed = RelaxedPlanGraph.of(other)
+    assert aimed.ops is first.ops and aimed.goal == RelaxedPlanGraph(other).goal
+    assert aimed.estimate(initial_state(other)) == RelaxedPlanGraph(other).estimate(
+        initial_state(other)
+    )
+    slower = replace(task, init_nums=tuple(v + 1 for v in task.init_nums))  # other values
+    assert not task.init_nums or RelaxedPlanGraph.of(slower).ops is not first.ops

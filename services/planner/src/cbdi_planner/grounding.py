@@ -23,7 +23,7 @@ from cbdi_planner.compile import Compiler
 from cbdi_planner.dnf import Conj
 from cbdi_planner.effects import Effs, build_snap
 from cbdi_planner.errors import Unsolvable
-from cbdi_planner.pddl.ast import Domain, NumEffect, Problem
+from cbdi_planner.pddl.ast import Cond, Domain, NumEffect, Problem
 from cbdi_planner.reachability import (
     GAtom,
     Objects,
@@ -44,7 +44,8 @@ class Grounding:
     variable; `fluent` names the predicates some effect changes (the rest were folded
     away); `reached` holds every fact relaxed-reachable from the initial state (snap
     semantics, as the pruning found them). A task for an initial state within `reached`
-    (and with the same objects, static facts and goal) has no action this one lacks.
+    (and with the same objects and static facts) has no action this one lacks, whatever
+    its goal (`aimed`).
     """
 
     task: Task
@@ -52,6 +53,34 @@ class Grounding:
     var_index: Mapping[tuple[str, ...], int]
     fluent: frozenset[str]
     reached: int
+    compiler: Compiler | None = None  # what numbered the facts: it compiles other goals
+    disjunctive: bool = False  # its actions carry the goal's `(#goal)`: for it alone
+
+    def aimed(self, task: Task, goal: tuple[Cond, ...], file: str = "") -> Task | None:
+        """`task` (this grounding's, another initial state maybe) aiming at `goal`.
+
+        Grounding does not depend on the goal (reachability runs from the initial
+        state), so a conjunctive goal only needs compiling over these facts. None when
+        that is not enough: this grounding carries a disjunctive goal of its own, `goal`
+        is disjunctive, or it reads a numeric variable no action numbered. Raise
+        Unsolvable for a goal that can never hold, as grounding does.
+        """
+        compiler = self.compiler
+        if compiler is None or self.disjunctive:
+            return None
+        numbered = len(compiler.var_index)
+        goals = compiler.goal(goal, file)
+        if len(compiler.var_index) != numbered:
+            for key in list(compiler.var_index)[numbered:]:  # leave the numbering as it was
+                del compiler.var_index[key]
+            return None
+        if not goals:
+            raise Unsolvable("the goal can never hold (a static or unreachable fact is wrong)")
+        if len(goals) > 1:
+            return None
+        return dataclasses.replace(
+            task, goal=goals[0].pre, goal_neg=goals[0].neg, goal_num=tuple(goals[0].num)
+        )
 
 
 def static_functions(domain: Domain) -> set[str]:
@@ -116,7 +145,15 @@ def grounding(domain: Domain, problem: Problem) -> Grounding:
         name=problem.name,
     )
     task.actions, reached = _prune(task)
-    return Grounding(task, compiler.fact_index, compiler.var_index, frozenset(fluent), reached)
+    return Grounding(
+        task,
+        compiler.fact_index,
+        compiler.var_index,
+        frozenset(fluent),
+        reached,
+        compiler,
+        len(goals) > 1,
+    )
 
 
 def _disjunctive_goal(

@@ -191,16 +191,15 @@ class RelaxedPlanGraph:
         """A graph of `task`, built once for every task that differs only in its facts.
 
         A planner makes a task per request and per epoch from one grounding (the same
-        actions, timed literals and goal; another initial state), and building the
-        graph costs as much as a few hundred evaluations on a big map: the operators
-        depend on the actions and on the numeric values their durations read, so a
-        task with the same ones gets a copy of the graph built before (its operators
-        shared, read only; its own goal and remembered estimates).
+        actions and timed literals; another initial state, another goal maybe), and
+        building the graph costs as much as a few hundred evaluations on a big map: the
+        operators depend on the actions and on the numeric values their durations read,
+        not on the goal, so a task with the same ones gets a copy of the graph built
+        before (its operators shared, read only; its own goal and remembered estimates).
         """
         key = (
             id(task.actions),
             id(task.tils),
-            task.goal,
             task.init_nums,
             len(task.facts),
             compress,

@@ -3,9 +3,12 @@
 Grounding a map's task takes long (173 ms on campus-30x30 here, against the few
 milliseconds the rest of an epoch's planner work takes), and most belief changes do not
 change what it grounds to: a robot or a person moves, a cell is taken or freed. So the
-task is grounded once per *key* (the goal, the objects, the static facts and the values
-of the functions no action changes) and reused for every belief set with that key whose
-initial state lies within what the cached grounding reaches.
+task is grounded once per *key* (the objects, the static facts and the values of the
+functions no action changes) and reused for every belief set with that key whose
+initial state lies within what the cached grounding reaches, whatever the goal: what
+grounding reaches runs from the initial state, so another goal is only compiled over
+the same facts (`Grounding.aimed`; a robot that explores aims at another cell every few
+epochs, and grounding anew for each cost campus-30x30's robots most of their CPU).
 
 For the cached task to serve while people walk, it is grounded from the beliefs plus
 every transient fact seen before (`Transients`: the `free` cells people
@@ -24,8 +27,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from cbdi.beliefs import Atom, BeliefSet, fact
-from cbdi_planner.agent.problem import problem_from_beliefs
+from cbdi_planner.agent.problem import goal_conditions, problem_from_beliefs
 from cbdi_planner.agent.transient import Transients
+from cbdi_planner.errors import Unsolvable
 from cbdi_planner.grounding import Grounding, grounding, static_functions
 from cbdi_planner.heuristic import RelaxedPlanGraph
 from cbdi_planner.pddl.ast import Domain, Problem
@@ -41,8 +45,9 @@ _NO_PROBLEM = Problem(name="", domain_name="", objects={}, init=[], init_numeric
 
 @dataclass(frozen=True, slots=True)
 class _Cached:
-    key: Key
+    key: Key  # what the grounding depends on: not the goal (`Grounding.aimed`)
     grounding: Grounding
+    goal: tuple[tuple[str, ...], ...]  # the goal it was grounded with
 
 
 class Groundings:
@@ -72,16 +77,16 @@ class Groundings:
         last = self._last
         if last is not None and last[0] is beliefs and last[1] == wanted:
             return last[2]  # the same beliefs again (a warm-up, then the epoch's work)
-        key, fluent_facts, values = self._parts(beliefs, wanted)
+        key, fluent_facts, values = self._parts(beliefs)
         cached = self._cached
         task = None
         if cached is not None and cached.key == key:
-            task = _with_init(cached.grounding, fluent_facts, values)
+            task = self._reuse(cached, fluent_facts, values, wanted)
             self.reused += task is not None
         if task is None:
             problem = problem_from_beliefs(self.domain, beliefs, goal)
             g = grounding(self.domain, self._superset(beliefs, goal, problem))
-            self._cached = _Cached(key, g)
+            self._cached = _Cached(key, g, wanted)
             self.grounded += 1
             task = _with_init(g, fluent_facts, values)
             assert task is not None, "a task grounded from a superset reaches its subset"
@@ -97,10 +102,13 @@ class Groundings:
         cached = self._cached
         if cached is None:
             return None
-        key, facts, values = self._parts(beliefs, tuple(tuple(g) for g in goal))
+        key, facts, values = self._parts(beliefs)
         if cached.key != key:
             return None
-        task = _with_init(cached.grounding, facts, values)
+        try:
+            task = self._reuse(cached, facts, values, tuple(tuple(g) for g in goal))
+        except Unsolvable:  # not even with every transient fact: not for it to tell
+            return None
         index = cached.grounding.fact_index
         if task is None or any(f not in index for f in missing):
             return None
@@ -109,9 +117,21 @@ class Groundings:
             restored |= 1 << index[f]
         return reaches_goal(task, State(restored, task.init_nums))
 
-    def _parts(
-        self, beliefs: BeliefSet, goal: tuple[tuple[str, ...], ...]
-    ) -> tuple[Key, list[Atom], dict[Atom, float]]:
+    def _reuse(
+        self,
+        cached: _Cached,
+        facts: list[Atom],
+        values: dict[Atom, float],
+        goal: tuple[tuple[str, ...], ...],
+    ) -> Task | None:
+        """The cached task from these facts and values, aiming at `goal`; None if it
+        does not serve (a fact it never reaches, a goal it cannot aim at)."""
+        task = _with_init(cached.grounding, facts, values)
+        if task is None or cached.goal == goal:
+            return task
+        return cached.grounding.aimed(task, goal_conditions(self.domain, goal))
+
+    def _parts(self, beliefs: BeliefSet) -> tuple[Key, list[Atom], dict[Atom, float]]:
         """The grounding's key for `beliefs` (what `problem_from_beliefs` would make of
         them but the fluent facts and values), their fluent facts and function values."""
         domain, fluent = self.domain, self.fluent
@@ -129,7 +149,6 @@ class Groundings:
                 (fluents if atom[0] in fluent else statics).append(atom)
         values = {a: v for a, v in beliefs.fluents.items() if a[0] in domain.functions}
         key = (
-            goal,
             objects,
             frozenset(statics),
             frozenset((a, v) for a, v in values.items() if a[0] in self.statics),

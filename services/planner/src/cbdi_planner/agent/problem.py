@@ -18,6 +18,7 @@ __all__ = [
     "GoalError",
     "beliefs_from_problem",
     "check_goal",
+    "goal_conditions",
     "goal_of",
     "problem_from_beliefs",
 ]
@@ -47,7 +48,7 @@ def problem_from_beliefs(
     domain: Domain, beliefs: BeliefSet, goal: Sequence[Sequence[str]], name: str = "beliefs"
 ) -> Problem:
     """Return the problem of reaching `goal` from `beliefs`."""
-    atoms = check_goal(domain, goal)
+    conditions = goal_conditions(domain, goal)
     known_types = set(domain.types) | {"object"}
     objects: dict[str, tuple[str, ...]] = {
         n: (t,)
@@ -70,8 +71,13 @@ def problem_from_beliefs(
         objects=objects,
         init=init,
         init_numeric=numeric,
-        goal=tuple(Lit(a, True, INST) for a in atoms),
+        goal=conditions,
     )
+
+
+def goal_conditions(domain: Domain, goal: Sequence[Sequence[str]]) -> tuple[Lit, ...]:
+    """Return `goal` as the problem's goal condition (`problem_from_beliefs`'s)."""
+    return tuple(Lit(a, True, INST) for a in check_goal(domain, goal))
 
 
 def beliefs_from_problem(problem: Problem) -> BeliefSet:
