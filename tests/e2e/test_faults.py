@@ -381,6 +381,11 @@ def test_a_killed_world_stalls_a_real_time_run_only_while_it_restarts(tmp_path: 
     again = int(recovered.group(1))
     assert sorted(set(epochs)) == list(range(summary["epochs"] + 1)), epochs
     assert all(n == 1 or e == again for e, n in collections.Counter(epochs).items()), epochs
+    # The restarted world tells how late it had each epoch of its life out after the one
+    # it went on from (wall time: no bound asserted; the figures are printed).
+    late = summary["lateness"]
+    print("epochs late", late)
+    assert late["epochs"] == summary["epochs"] - again and late["bound"] == 0.025
     gaps = [b - a for (_, a), (_, b) in itertools.pairwise(ticks)]
     # The gap is a restart's (about 1 s on an idle machine; `docs/architecture.md` has
     # the figures): a loaded machine may take longer, a world that never went on forever.

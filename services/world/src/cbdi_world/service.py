@@ -45,6 +45,7 @@ from cbdi.wire.world import (
 )
 from cbdi_world.acks import AckTracker, members_of
 from cbdi_world.errors import UnknownAgentError
+from cbdi_world.lateness import Lateness
 from cbdi_world.recovery import (
     Entry,
     Keeper,
@@ -91,6 +92,7 @@ class WorldService:
             simulator=settings.simulator,
         )
         self.finished: RunFinished | None = None
+        self.lateness = Lateness(self.epoch_wall())
         self.trace = RequestTrace()
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
         self.keeper = keeper
@@ -194,7 +196,8 @@ class WorldService:
             start = self.clock.now() - (self.world.epoch + 1) * self.epoch_wall()
         while self.finished is None:
             await self.pace(start)
-            await self.advance(self.world.step())
+            due = start + (self.world.epoch + 1) * self.epoch_wall()
+            await self.advance(self.world.step(), due)
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
         if self.keeper is not None:
             if self.settings.resume == RESUME_IF_FOUND:
@@ -208,11 +211,14 @@ class WorldService:
             self.ctx.log.info("lingered", seconds=self.settings.linger)
             self.ctx.stop()
 
-    async def advance(self, result: EpochResult) -> None:
-        """Save the epoch the simulator reached, publish it, note that, see if the run ended."""
+    async def advance(self, result: EpochResult, due: float | None = None) -> None:
+        """Save the epoch the simulator reached, publish it, note that, see if the run
+        ended; `due`: the wall time it was due at (paced), to tell how late it went out."""
         self.served.clear()
         self.save(result)
         await self.publish_epoch(result)
+        if due is not None:
+            self.lateness.observe(due, self.clock.now())
         self.note(Published(result.epoch))
         await self.check_end()
 
@@ -358,6 +364,7 @@ class WorldService:
                 stalls=dict(self.acks.stalls),
                 requests=self.trace.count,
                 trace_digest=self.trace.digest(),
+                lateness=self.lateness.summary(),
             )
             await publish(self.ctx.bus, keys.world_stream("stats"), w.stats(), block=True)
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)

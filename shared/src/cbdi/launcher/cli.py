@@ -335,6 +335,13 @@ def _report(summary: RunSummary, as_json: bool) -> None:
     print(line, file=sys.stderr)
     for member, epochs in summary.stalls.items():
         print(f"  {member}: missed the ack timeout in {epochs} epochs", file=sys.stderr)
+    late = summary.lateness
+    if late:
+        print(
+            f"  epochs late (wall s): median {late['median']} p95 {late['p95']} max "
+            f"{late['max']}; {late['over']} of {late['epochs']} over {late['bound']}",
+            file=sys.stderr,
+        )
     for name, counts in summary.stats.get("agents", {}).items():
         text = " ".join(f"{k}={v}" for k, v in counts.items() if v)  # what happened
         acts = summary.actions.get(name)

@@ -339,6 +339,10 @@ async def _await_end(
             summary.epochs, summary.sim_time = msg.epoch, msg.time
             summary.stalls = dict(sorted(msg.stalls.items()))
             summary.requests, summary.trace_digest = msg.requests, msg.trace_digest
+            late = msg.lateness
+            summary.lateness = (
+                {f: getattr(late, f) for f in late.__struct_fields__} if late else None
+            )
             end(msg.reason)
 
     async def failure(proc: ManagedProcess) -> None:

@@ -44,6 +44,9 @@ class RunSummary:
     trace_digest: str = ""
     # Lockstep members that missed an ack timeout (member -> epochs stalled).
     stalls: dict[str, int] = field(default_factory=dict)
+    # Paced runs: how late the world had its epochs out, in wall seconds (`EpochLateness`:
+    # epochs, median, p95, max, and `over` the `bound` of a tenth of an epoch).
+    lateness: dict[str, float | int] | None = None
 
     @property
     def ok(self) -> bool:

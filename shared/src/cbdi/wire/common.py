@@ -10,6 +10,7 @@ from cbdi.wire.base import Message
 from cbdi.wire.fields import Count, Finite, Id, Many, NonNegative, Symbol, Text
 
 __all__ = [
+    "EpochLateness",
     "ErrorReply",
     "ErrorReport",
     "Heartbeat",
@@ -43,6 +44,19 @@ class ErrorReport(Message, frozen=True, tag="cbdi.ErrorReport/1"):
     count: Count
 
 
+class EpochLateness(Message, frozen=True, tag="cbdi.EpochLateness/1"):
+    """How late a paced world (`--speed` above 0) had its epochs out: per epoch, the wall
+    seconds from its due time to the end of its publication (tick, outcomes, percepts).
+    `over`: the epochs later than `bound`, a tenth of an epoch's wall duration."""
+
+    epochs: Count
+    median: NonNegative
+    p95: NonNegative
+    max: NonNegative
+    bound: NonNegative
+    over: Count
+
+
 class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     """Announce that a run ended: `reason` is `done` (the world reached its goal) or
     `time_limit`."""
@@ -55,6 +69,8 @@ class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     # The world's request trace: how many requests, and the digest of all of them.
     requests: Count = 0
     trace_digest: Id = ""
+    # Paced runs: how late the epochs went out (wall time: not part of the digest).
+    lateness: EpochLateness | None = None
 
 
 class RunLaunched(Message, frozen=True, tag="cbdi.RunLaunched/1"):
