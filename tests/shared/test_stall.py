@@ -50,8 +50,10 @@ def test_a_lasting_stall_is_told_every_period_with_the_share_the_process_wanted(
     assert judge.check(now=1.4, turned=0.0, clocks=_c(1.0, 1.2, 10.6)) is None
     again = judge.check(now=1.6, turned=0.0, clocks=_c(1.01, 1.3, 11.4))
     assert again == Stalled(1.6, 0.01, 2.0, first=False)  # 1.4 s over 0.7 s: starved
+    assert judge.stalling
     resumed = judge.check(now=1.9, turned=1.8, clocks=_c(1.02, 1.4, 12.3))
     assert resumed == Resumed(1.8, 0.02, 0.4, 2.3)
+    assert not judge.stalling  # the watcher reads the share only near a stall
 
 
 def test_an_asleep_process_wants_no_cpu_and_an_unknown_share_stays_unknown() -> None:

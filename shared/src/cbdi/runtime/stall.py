@@ -99,6 +99,11 @@ class StallJudge:
         self._last: tuple[Counters, float] | None = None  # the clocks at the last check
         self._told = 0.0  # when the stall was last reported
 
+    @property
+    def stalling(self) -> bool:
+        """Whether a stall was found and has not ended yet."""
+        return self._since is not None
+
     def check(self, now: float, turned: float, clocks: Counters) -> Stalled | Resumed | None:
         """Judge at `now` a loop last seen turning at `turned`, the clocks at `clocks`."""
         if self._since is not None and turned > self._since[0]:
@@ -202,7 +207,8 @@ async def watch_loop(
     def watch() -> None:
         while not done.wait(period):
             now = time.monotonic()
-            near = now - turned[0] > limit / 2  # a stall may come: read what it will need
+            # A stall may come (or one ends now): read what it will need.
+            near = judge.stalling or now - turned[0] > limit / 2
             decision = judge.check(now, turned[0], read_counters(clock, near))
             if isinstance(decision, Stalled):
                 if decision.first:
