@@ -134,6 +134,18 @@ def test_a_starved_process_is_reported_once_and_never_killed() -> None:
     assert [type(f) for f in found] == [Starved]
 
 
+def test_a_loop_waiting_in_a_send_on_a_congested_bus_is_reported_and_never_killed() -> None:
+    """Asleep by the CPU's account (nobody wanted it), but in a send: the network has no
+    room (a router starved of CPU); killing the sender would make none."""
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, RUN)
+    waiting = Stall(stalled_for=3.0, loop_cpu=0.01, wanted=0.02, sending=True)
+    found = _checks(dog, 3.1, 60.0, stalled=waiting)
+    assert found == [Starved("robot1/planner", 12, found[0].stalled_for, 0.02, cause="bus")]
+    held = Stall(stalled_for=3.0, loop_cpu=2.5, wanted=1.0, sending=True)  # its code ran
+    assert not held.congested(2.0) and waiting.congested(2.0) and not waiting.starved(2.0)
+
+
 @pytest.mark.parametrize(
     "word",
     [

@@ -100,3 +100,32 @@ def test_the_log_names_the_code_that_holds_the_loop() -> None:
     assert float(fields["stood"]) >= 0.2
     assert float(fields["cpu"]) > 0
     assert float(fields["process_cpu"]) >= float(fields["cpu"])
+
+
+def test_a_loop_standing_in_a_send_says_so_in_its_pulses() -> None:
+    """`sending` (the bus's sends under way) is read by the watcher's thread: a loop that
+    waits in a send for room on the network is told from one held by code."""
+    out, pulses, in_send = io.StringIO(), [], [False]
+    log = Log("world", stream=out)
+
+    async def run() -> None:
+        watcher = watch_loop(
+            log,
+            limit=0.2,
+            period=0.05,
+            pulse=pulses.append,
+            every=0.1,
+            sending=lambda: in_send[0],
+        )
+        watch = asyncio.get_running_loop().create_task(watcher)
+        await asyncio.sleep(0.1)
+        in_send[0] = True  # a put that waits (asleep: no CPU)
+        deadline = time.monotonic() + 60
+        while not pulses and time.monotonic() < deadline:
+            time.sleep(0.05)
+        in_send[0] = False
+        watch.cancel()
+
+    asyncio.run(run())
+    assert pulses and pulses[0].sending and pulses[0].loop_cpu < 0.2
+    assert "sending=True" in next(x for x in out.getvalue().splitlines() if "loop_stalled" in x)

@@ -64,6 +64,9 @@ class Bus(Protocol):
     """
 
     sent: Counter[str]
+    # Publications under way: one that stays above 0 while the loop stands is a send
+    # waiting for room on the network (congestion), read by the stall watcher's thread.
+    sending: int
 
     async def publish(self, key: str, payload: bytes, *, block: bool = False) -> None:
         """Publish `payload` on `key`; `block` (commands, plans) never drops under load."""

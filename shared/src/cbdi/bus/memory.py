@@ -99,6 +99,7 @@ class MemoryBus:
         self._subscriptions: list[_MemorySubscription] = []
         self._tokens: list[_MemoryToken] = []
         self.sent: Counter[str] = Counter()
+        self.sending = 0  # a send here never waits for room
         self.published = 0
 
     def _check(self) -> None:

@@ -258,6 +258,7 @@ class ZenohBus:
         self._publishers: OrderedDict[tuple[str, bool], Any] = OrderedDict()
         self.sent: Counter[str] = Counter()  # publications per key, also the sequence
         self.published = 0  # publications over all keys: the order of what we sent
+        self.sending = 0  # puts under way (a blocking one waits for room: congestion)
         self._queriers: OrderedDict[tuple[str, float], Any] = OrderedDict()
         self._closed = False
 
@@ -272,7 +273,11 @@ class ZenohBus:
             publisher = self._declare_publisher(key, block)
         seq = self.sent[key] = self.sent[key] + 1
         self.published += 1
-        publisher.put(payload, attachment=stamp(seq, self.published))
+        self.sending += 1
+        try:
+            publisher.put(payload, attachment=stamp(seq, self.published))
+        finally:
+            self.sending -= 1
 
     def pulse(self, key: str, payload: bytes) -> None:
         if self._closed:

@@ -15,7 +15,10 @@ watcher (`cbdi.runtime.stall`) sends its heartbeat from its own thread with the 
 (`Stall`). A process that wanted the CPU most of the time (`wanted` >= `STARVED`) while
 its loop's thread ran less than the limit in CPU time is **starved**: a loaded machine
 gave it too little, it is slow, not frozen, so it is reported once (`Starved`) and never
-killed while that lasts. A loop whose own thread ran the limit's worth of CPU without a
+killed while that lasts. So is a loop that stands in a send on the bus (`sending`: the
+network has no room, a router starved of CPU): killing the sender makes no room, and
+its restart sends more (32 robots on 2 cores: the world, killed this way, restarted
+until the run failed). A loop whose own thread ran the limit's worth of CPU without a
 turn is held by code (frozen, whatever the load); a process neither running nor waiting
 for a CPU is asleep (a deadlock, a blocking call): frozen too. A process that sends
 nothing at all (stopped, or a thread holding the interpreter) is frozen. Evidence counts
@@ -48,26 +51,35 @@ STARVED = 0.5  # a process whose threads wanted the CPU this share of a stall is
 class Stall:
     """A process's word that its loop has not turned for `stalled_for` s: its thread ran
     `loop_cpu` s meanwhile, its threads wanted the CPU `wanted` of the time (None:
-    unknown)."""
+    unknown), and whether the loop stands in a send on the bus (`sending`)."""
 
     stalled_for: float
     loop_cpu: float
     wanted: float | None
+    sending: bool = False
 
     def starved(self, limit: float) -> bool:
         """True if the process waited for the CPU, its loop not held by code."""
         return self.wanted is not None and self.wanted >= STARVED and self.loop_cpu < limit
 
+    def congested(self, limit: float) -> bool:
+        """True if the loop waits in a send for room on the network, not held by code:
+        a congested bus (killing the sender would not make room, and its restart would
+        send more)."""
+        return self.sending and self.loop_cpu < limit
+
 
 @dataclass(frozen=True)
 class Starved:
     """The decision that process `pid` of `service` is starved, not frozen: its loop has
-    stood `stalled_for` s while its threads wanted the CPU `wanted` of the time."""
+    stood `stalled_for` s while its threads wanted the CPU `wanted` of the time (`cause`
+    `cpu`), or while it waited in a send on a congested bus (`bus`)."""
 
     service: str
     pid: int
     stalled_for: float
     wanted: float
+    cause: str = "cpu"
 
 
 @dataclass(frozen=True)
@@ -123,7 +135,8 @@ class Watchdog:
         word = self._stalls.get(service)
         if word is None or word[0] != pid or now - word[1] > self.limit:
             return None
-        return word[2] if word[2].starved(self.limit) else None
+        stall = word[2]
+        return stall if stall.starved(self.limit) or stall.congested(self.limit) else None
 
     def check(self, now: float, running: Mapping[str, int]) -> list[Frozen | Starved]:
         """Return the services of `running` (service -> current pid) newly judged frozen.
@@ -162,7 +175,8 @@ class Watchdog:
                 if process not in self._starved:
                     self._starved.add(process)
                     wanted = starving.wanted or 0.0
-                    found.append(Starved(s, running[s], round(t, 3), round(wanted, 3)))
+                    cause = "cpu" if starving.starved(self.limit) else "bus"
+                    found.append(Starved(s, running[s], round(t, 3), round(wanted, 3), cause))
                 continue
             kill = s in mute or t > self.kill_after - self.tick
             if process in self._killed or (process in self._judged and not kill):

@@ -6,8 +6,8 @@ hears on `cbdi/heartbeat/**` with the wall clock, and acts on each `Frozen`: a l
 message on `cbdi/launcher/health` (which the monitor records); at the kill limit also
 SIGKILL, after which the service's supervisor restarts it by its restart policy, as after
 a crash. On each `Starved`: a log line (`starved service=... pid=... stalled_for=...
-wanted=... action=none`), a `ServiceStarved` message there too, and a count in the run's
-summary (`starved`); nothing is killed.
+wanted=... cause=cpu|bus action=none`), a `ServiceStarved` message there too, and a
+count in the run's summary (`starved`); nothing is killed.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ async def watch_heartbeats(bus: Bus, dog: Watchdog, clock: Clock | None = None) 
     async for _, beat in beats:
         stall = None
         if beat.stalled_for > 0:
-            stall = Stall(beat.stalled_for, beat.loop_cpu, beat.wanted)
+            stall = Stall(beat.stalled_for, beat.loop_cpu, beat.wanted, beat.sending)
         dog.beat(beat.service, beat.pid, clock.now(), stall)
 
 
@@ -85,12 +85,14 @@ async def _starved(bus: Bus, proc: ManagedProcess, starved: Starved) -> None:
     proc.sink(
         "launcher",
         f"starved service={starved.service} pid={starved.pid}"
-        f" stalled_for={starved.stalled_for:.2f} wanted={starved.wanted:.2f} action=none",
+        f" stalled_for={starved.stalled_for:.2f} wanted={starved.wanted:.2f}"
+        f" cause={starved.cause} action=none",
     )
     report = ServiceStarved(
         service=starved.service,
         pid=starved.pid,
         stalled_for=starved.stalled_for,
         wanted=min(starved.wanted, 4096.0),
+        cause="bus" if starved.cause == "bus" else "cpu",
     )
     await publish(bus, keys.launcher_stream("health"), report, block=True)

@@ -245,7 +245,13 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
     watch = None
     if limit:
         pulse = _stall_pulse(contexts) if beat > 0 else None
-        watcher = watch_loop(logs[0], limit, pulse=pulse, every=beat or None)
+        watcher = watch_loop(
+            logs[0],
+            limit,
+            pulse=pulse,
+            every=beat or None,
+            sending=lambda: any(ctx.bus.sending > 0 for ctx in contexts),
+        )
         watch = loop.create_task(watcher, name="stall-watch")
     try:
         async with asyncio.TaskGroup() as tg:
@@ -273,6 +279,7 @@ def _stall_pulse(contexts: Sequence[ServiceContext]) -> Callable[[Stalled], None
                 stalled_for=stall.silent_for,
                 loop_cpu=stall.loop_cpu,
                 wanted=None if stall.wanted is None else min(stall.wanted, 4096.0),
+                sending=stall.sending,
             )
             ctx.bus.pulse(keys.heartbeat(ctx.service), encode(beat))
 

@@ -24,6 +24,7 @@ The decisions are `StallJudge`'s (pure); the shell reads the clocks and the fram
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 import os
 import sys
@@ -55,12 +56,14 @@ class Counters:
 class Stalled:
     """The loop has not turned for `silent_for` s; since the stall was found its thread
     ran `loop_cpu` s and the process's threads wanted the CPU `wanted` of the time
-    (None: unknown). `first`: the stall was just found (logged once)."""
+    (None: unknown). `first`: the stall was just found (logged once). `sending`: the
+    loop stands in a send on the bus, waiting for room on the network (congestion)."""
 
     silent_for: float
     loop_cpu: float = 0.0
     wanted: float | None = None
     first: bool = True
+    sending: bool = False
 
 
 @dataclass(frozen=True)
@@ -195,9 +198,11 @@ async def watch_loop(
     period: float = 0.1,
     pulse: Callable[[Stalled], None] | None = None,
     every: float | None = None,
+    sending: Callable[[], bool] | None = None,
 ) -> None:
     """Mark the loop's turns every `period` s; a daemon thread logs its stalls and hands
-    the evidence to `pulse` (called in that thread) every `every` s while one lasts."""
+    the evidence to `pulse` (called in that thread) every `every` s while one lasts;
+    `sending` tells whether the loop is in a send on the bus (`Bus.sending`)."""
     judge = StallJudge(limit, every if pulse is not None else None)
     loop_thread = threading.get_ident()
     clock = _cpu_clock(loop_thread)
@@ -211,9 +216,14 @@ async def watch_loop(
             near = judge.stalling or now - turned[0] > limit / 2
             decision = judge.check(now, turned[0], read_counters(clock, near))
             if isinstance(decision, Stalled):
+                if sending is not None and sending():
+                    decision = dataclasses.replace(decision, sending=True)
                 if decision.first:
                     log.warning(
-                        "loop_stalled", silent_for=decision.silent_for, where=_where(loop_thread)
+                        "loop_stalled",
+                        silent_for=decision.silent_for,
+                        sending=decision.sending,
+                        where=_where(loop_thread),
                     )
                 if pulse is not None:
                     pulse(decision)

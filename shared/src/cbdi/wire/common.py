@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -113,7 +113,9 @@ class Heartbeat(Message, frozen=True, tag="cbdi.Heartbeat/1"):
     from its own thread instead, with the evidence: the loop has not turned for
     `stalled_for` s (0: sent by the loop), its thread ran `loop_cpu` s meanwhile, and the
     process's threads ran or waited runnable for a CPU `wanted` of the time (None:
-    unknown). A process that wanted the CPU and got little is starved, not frozen.
+    unknown), and whether the loop stands in a send on the bus (`sending`: waiting for
+    room on a congested network). A process that wanted the CPU and got little is
+    starved, one waiting for the network congested; neither is frozen.
     """
 
     service: Symbol
@@ -122,17 +124,20 @@ class Heartbeat(Message, frozen=True, tag="cbdi.Heartbeat/1"):
     stalled_for: NonNegative = 0.0
     loop_cpu: NonNegative = 0.0
     wanted: Share | None = None
+    sending: bool = False
 
 
 class ServiceStarved(Message, frozen=True, tag="cbdi.ServiceStarved/1"):
     """The launcher's word that a service's loop has not turned for `stalled_for` wall
-    seconds because its process got too little CPU (its threads wanted it `wanted` of
-    the time): slow, not frozen, so it is not killed."""
+    seconds for want of what the machine lacked: `cause` `cpu`, its process got too
+    little CPU (its threads wanted it `wanted` of the time), or `bus`, its loop waits in
+    a send for room on a congested network. Slow, not frozen, so it is not killed."""
 
     service: Symbol
     pid: Count
     stalled_for: NonNegative
     wanted: Share
+    cause: Literal["cpu", "bus"] = "cpu"
 
 
 class ServiceFrozen(Message, frozen=True, tag="cbdi.ServiceFrozen/1"):
