@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from cbdi.launcher.liveness import Frozen, Stall, Starved, Watchdog
@@ -173,3 +175,39 @@ def test_a_starved_process_that_falls_silent_is_killed_at_the_kill_limit() -> No
     assert [f.kill for f in frozen] == [False, True]
     assert 6.9 <= frozen[0].silent_for <= 7.2  # once its last word (at 8) is stale
     assert 9.9 <= frozen[1].silent_for <= 10.0
+
+
+def test_the_evidence_a_process_leaves_in_its_stall_file_is_heard(tmp_path: Path) -> None:
+    """A congested network drops the heartbeats that carry a stall's evidence; under
+    `cbdi up` the stall watcher also leaves it in a file the watchdog reads: a process
+    whose loop waits in a send is then congested, not frozen (the world of a 32-robot
+    run was killed four times for want of it)."""
+    from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
+    from cbdi.launcher.watch import _read_stall
+    from cbdi.runtime.service import _leave, _stall_beat
+    from cbdi.runtime.stall import Stalled
+
+    members = ("robot1/planner", "robot1/scheduler")
+    spec = ProcessSpec.of("robot1/agent", ["cbdi"], [], {}, hosts=members)
+    proc = ManagedProcess(spec, RestartPolicy(), lambda *_: None, str(tmp_path / "0.heartbeat"))
+    running = {"router": 10, "robot1/planner": 12, "robot1/scheduler": 12}
+    dog = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(dog, 3.0, running)
+    seen: dict[str, float] = {}
+    _read_stall(dog, proc, 12, 3.1, seen)  # no file yet: nothing
+    found: list[Frozen | Starved] = []
+    t = 3.1
+    while t < 20.0:
+        stall = Stalled(round(t - 3.0, 3), loop_cpu=0.01, wanted=0.02, sending=True)
+        _leave(proc.stall_file, _stall_beat("robot1/planner", 12, stall))
+        _read_stall(dog, proc, 12, t, seen)
+        dog.beat("router", 10, t)  # the rest of the run beats on
+        found += dog.check(t, running)
+        t += 0.5
+    assert [(type(f), f.service) for f in found] == [(Starved, m) for m in sorted(members)]
+    assert all(isinstance(f, Starved) and f.cause == "bus" for f in found)
+    _leave(proc.stall_file, _stall_beat("robot1/planner", 99, stall))  # another life's
+    other = Watchdog(2.0, 0.1, kill_after=10.0)
+    _beating(other, 3.0, running)
+    _read_stall(other, proc, 12, 3.5, {})
+    assert [type(f) for f in _checks(other, 3.6, 20.0, running, beating=1)] == [Frozen] * 4

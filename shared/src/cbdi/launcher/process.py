@@ -21,6 +21,7 @@ __all__ = ["ManagedProcess", "ProcessSpec", "RestartPolicy"]
 RESTART_POLICIES = ("never", "on-failure", "always")
 EXIT_BAD_CONFIG = 2  # what every cbdi service exits with on bad settings or input files
 RESTART_ENV = "CBDI_RESTART"
+STALL_FILE_ENV = "CBDI_STALL_FILE"  # where a child's stall watcher leaves its evidence
 
 
 @dataclass(frozen=True)
@@ -83,10 +84,15 @@ LineSink = Callable[[str, str], None]
 class ManagedProcess:
     """A child process whose output lines go to `sink(service, line)`."""
 
-    def __init__(self, spec: ProcessSpec, policy: RestartPolicy, sink: LineSink) -> None:
+    def __init__(
+        self, spec: ProcessSpec, policy: RestartPolicy, sink: LineSink, stall_file: str = ""
+    ) -> None:
         self.spec = spec
         self.policy = policy
         self.sink = sink
+        # The file its stall watcher writes its evidence to (`cbdi.runtime.stall`), read
+        # by the watchdog when the network drops the heartbeats that carry it.
+        self.stall_file = stall_file
         self.proc: asyncio.subprocess.Process | None = None
         self.restarts = 0
         self.freezes = 0
@@ -111,6 +117,8 @@ class ManagedProcess:
         # CBDI_RESTART: how many times it was restarted (0 at first), so a service can
         # tell a restart within the run from a new run (a recorder continues its file).
         restart = {RESTART_ENV: str(self.restarts)}
+        if self.stall_file:
+            restart[STALL_FILE_ENV] = self.stall_file
         env = {**os.environ, **self.spec.env, **child_env(), **restart}
         self.proc = await asyncio.create_subprocess_exec(
             *self.spec.argv,

@@ -19,6 +19,7 @@ BDI agent's plans, replans, forecast-triggered repairs and search rounds, and th
 from __future__ import annotations
 
 import asyncio
+import os
 import shutil
 import signal
 import sys
@@ -148,7 +149,12 @@ async def _launch(
     except BaseException:
         shutil.rmtree(state_dir, ignore_errors=True)
         raise
-    procs = [ManagedProcess(spec, opts.restart, say) for spec in specs]
+    stalls = f"{state_dir}/stall"  # each process's stall evidence, for the watchdog
+    os.makedirs(stalls, exist_ok=True)
+    procs = [
+        ManagedProcess(spec, opts.restart, say, f"{stalls}/{k}.heartbeat")
+        for k, spec in enumerate(specs)
+    ]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
     started = time.monotonic()

@@ -12,14 +12,18 @@ count in the run's summary (`starved`); nothing is killed.
 
 from __future__ import annotations
 
+import os
+import time
 from collections.abc import AsyncIterator, Sequence
 
 from cbdi import keys
 from cbdi.bus import LogSink, messages, publish
 from cbdi.bus.base import Bus
 from cbdi.clock import Clock, WallClock
+from cbdi.errors import WireError
 from cbdi.launcher.liveness import Frozen, Stall, Starved, Watchdog
 from cbdi.launcher.process import ManagedProcess
+from cbdi.wire.base import decode
 from cbdi.wire.common import Heartbeat, ServiceFrozen, ServiceStarved
 
 __all__ = ["TICK", "watch_heartbeats", "watch_processes"]
@@ -49,11 +53,38 @@ async def watch_processes(
     """Check the running processes every tick; report and kill each one judged frozen."""
     clock = clock or WallClock()
     by_service = {member: p for p in procs for member in p.spec.members}
+    seen: dict[str, float] = {}  # stall file -> the modification time read
     while True:
         await clock.sleep(dog.tick)
         running = {m: p.pid for p in procs if p.pid and p.running for m in p.spec.members}
+        for p in procs:
+            if p.stall_file and p.pid and p.running:
+                _read_stall(dog, p, p.pid, clock.now(), seen)
         for frozen in dog.check(clock.now(), running):
             await _act(bus, dog, by_service[frozen.service], frozen)
+
+
+def _read_stall(
+    dog: Watchdog, proc: ManagedProcess, pid: int, now: float, seen: dict[str, float]
+) -> None:
+    """Note the stall evidence `proc` left in its file since the last look, if fresh and
+    its current process's: the heartbeat that carried it may have been dropped by a
+    congested network (`cbdi.runtime.service`)."""
+    path = proc.stall_file
+    try:
+        mtime = os.stat(path).st_mtime
+        if seen.get(path) == mtime or time.time() - mtime > dog.limit:
+            return
+        seen[path] = mtime
+        with open(path, "rb") as f:
+            beat = decode(f.read(), Heartbeat)
+    except (OSError, WireError):  # none yet, or being replaced
+        return
+    if beat.pid != pid or beat.stalled_for <= 0:
+        return
+    stall = Stall(beat.stalled_for, beat.loop_cpu, beat.wanted, beat.sending)
+    for member in proc.spec.members:
+        dog.beat(member, pid, now, stall)
 
 
 async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen | Starved) -> None:

@@ -267,23 +267,44 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
 
 def _stall_pulse(contexts: Sequence[ServiceContext]) -> Callable[[Stalled], None]:
     """Send each service's heartbeat with the evidence of a stall, from the watcher's
-    thread: the watchdog hears the process while its loop stands (see `Heartbeat`)."""
+    thread: the watchdog hears the process while its loop stands (see `Heartbeat`).
+
+    Under `cbdi up` (`CBDI_STALL_FILE`) the evidence also goes to a file beside the
+    launcher: a congested network drops heartbeats (they are best effort), and a loop
+    that waits in a send for room on it is exactly the one to hear about."""
     pid = os.getpid()
+    path = os.environ.get("CBDI_STALL_FILE", "")
 
     def pulse(stall: Stalled) -> None:
+        if path:
+            _leave(path, _stall_beat(contexts[0].service, pid, stall))
         for ctx in contexts:
-            beat = Heartbeat(
-                service=ctx.service,
-                pid=pid,
-                beat=0,
-                stalled_for=stall.silent_for,
-                loop_cpu=stall.loop_cpu,
-                wanted=None if stall.wanted is None else min(stall.wanted, 4096.0),
-                sending=stall.sending,
-            )
+            beat = _stall_beat(ctx.service, pid, stall)
             ctx.bus.pulse(keys.heartbeat(ctx.service), encode(beat))
 
     return pulse
+
+
+def _stall_beat(service: str, pid: int, stall: Stalled) -> Heartbeat:
+    return Heartbeat(
+        service=service,
+        pid=pid,
+        beat=0,
+        stalled_for=stall.silent_for,
+        loop_cpu=stall.loop_cpu,
+        wanted=None if stall.wanted is None else min(stall.wanted, 4096.0),
+        sending=stall.sending,
+    )
+
+
+def _leave(path: str, beat: Heartbeat) -> None:
+    """Write `beat` to `path` whole (a reader never sees half of it); best effort."""
+    try:
+        with open(f"{path}.tmp", "wb") as f:
+            f.write(encode(beat))
+        os.replace(f"{path}.tmp", path)
+    except OSError:
+        pass  # the launcher's directory went (the run ends): nobody reads it
 
 
 async def _credentials_made(settings: ServiceSettings, log: Log) -> None:
