@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import io
 import time
+from pathlib import Path
 
 import pytest
 
@@ -129,3 +130,36 @@ def test_a_loop_standing_in_a_send_says_so_in_its_pulses() -> None:
     asyncio.run(run())
     assert pulses and pulses[0].sending and pulses[0].loop_cpu < 0.2
     assert "sending=True" in next(x for x in out.getvalue().splitlines() if "loop_stalled" in x)
+
+
+def test_a_pulse_stuck_on_a_congested_bus_does_not_stop_the_watcher(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The bus's send may wait on a congested network: the watcher hands it to a thread
+    (one at a time) and goes on writing its evidence for the launcher."""
+    import threading
+    from types import SimpleNamespace
+
+    from cbdi.runtime.service import _stall_pulse
+    from cbdi.runtime.stall import Stalled
+    from cbdi.wire.base import decode
+    from cbdi.wire.common import Heartbeat
+
+    room, calls = threading.Event(), []
+
+    def stuck(key: str, payload: bytes) -> None:
+        calls.append(key)
+        room.wait(60)  # no room on the network
+
+    path = tmp_path / "0.heartbeat"
+    monkeypatch.setenv("CBDI_STALL_FILE", str(path))
+    ctx = SimpleNamespace(service="world", bus=SimpleNamespace(pulse=stuck))
+    pulse = _stall_pulse([ctx])  # type: ignore[list-item]
+    for k in range(1, 6):
+        pulse(Stalled(float(k), sending=True))  # returns at once, each time
+        assert decode(path.read_bytes(), Heartbeat).stalled_for == float(k)
+    room.set()
+    deadline = time.monotonic() + 60
+    while not calls and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert calls == ["cbdi/heartbeat/world"]  # one send in flight, the others skipped

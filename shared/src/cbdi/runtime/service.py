@@ -17,6 +17,7 @@ import itertools
 import math
 import os
 import signal
+import threading
 import traceback
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
@@ -274,13 +275,23 @@ def _stall_pulse(contexts: Sequence[ServiceContext]) -> Callable[[Stalled], None
     that waits in a send for room on it is exactly the one to hear about."""
     pid = os.getpid()
     path = os.environ.get("CBDI_STALL_FILE", "")
+    sender: list[threading.Thread] = []  # the send under way, if any
+
+    def send(stall: Stalled) -> None:
+        for ctx in contexts:
+            beat = _stall_beat(ctx.service, pid, stall)
+            ctx.bus.pulse(keys.heartbeat(ctx.service), encode(beat))
 
     def pulse(stall: Stalled) -> None:
         if path:
             _leave(path, _stall_beat(contexts[0].service, pid, stall))
-        for ctx in contexts:
-            beat = _stall_beat(ctx.service, pid, stall)
-            ctx.bus.pulse(keys.heartbeat(ctx.service), encode(beat))
+        # Sent from a thread of its own, one at a time: on a congested network the send
+        # itself may wait, and the watcher must go on watching (and writing its file).
+        if sender and sender[0].is_alive():
+            return
+        thread = threading.Thread(target=send, args=(stall,), name="stall-pulse", daemon=True)
+        sender[:] = [thread]
+        thread.start()
 
     return pulse
 
