@@ -211,3 +211,26 @@ def test_the_evidence_a_process_leaves_in_its_stall_file_is_heard(tmp_path: Path
     _beating(other, 3.0, running)
     _read_stall(other, proc, 12, 3.5, {})
     assert [type(f) for f in _checks(other, 3.6, 20.0, running, beating=1)] == [Frozen] * 4
+
+
+def test_an_agents_process_runs_nicer_than_the_shared_ones() -> None:
+    """`cbdi up --agent-nice`: the router, world and monitor keep the launcher's
+    priority, an agent's process takes the niceness asked (never a higher priority)."""
+    import os
+    import subprocess
+    import sys
+
+    from cbdi.launcher.process import ProcessSpec
+    from cbdi.launcher.run import _niced
+    from cbdi.runtime.parent import NICE_ENV, take_niceness
+
+    world = ProcessSpec.of("world", ["cbdi-world"], [], {})
+    agent = ProcessSpec.of("robot1/agent", ["cbdi"], [], {"X": "1"})
+    assert _niced(world, 5) is world and _niced(agent, 0) is agent
+    assert _niced(agent, 5).env == {"X": "1", NICE_ENV: "5"}
+    assert take_niceness({NICE_ENV: "oops"}) == 0 and take_niceness({NICE_ENV: "40"}) == 0
+    code = "from cbdi.runtime.parent import take_niceness as t; import os; t(); print(os.nice(0))"
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    env = {**os.environ, NICE_ENV: "7"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert int(out.stdout) == max(base, 7)

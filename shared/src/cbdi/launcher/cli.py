@@ -144,6 +144,15 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(default 10; at least --freeze-limit)",
     )
     p.add_argument(
+        "--agent-nice",
+        type=int,
+        default=5,
+        metavar="N",
+        help="run the agents' processes at niceness N (0 to 19; default 5), the router, "
+        "world and monitor at cbdi up's: on a machine short of CPU the bus and the world "
+        "keep pace and the robots slow down",
+    )
+    p.add_argument(
         "--agent-process",
         action="store_true",
         help="run each BDI agent's planner, scheduler and executor in one process "
@@ -288,6 +297,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         delays = _delays(args.delay, scenario)
         faults = check_faults(args.fault, scenario, args.record)
         _check_liveness(args.heartbeat, args.freeze_limit)
+        if not 0 <= args.agent_nice <= 19:
+            raise ConfigError("--agent-nice", str(args.agent_nice), "must be 0 to 19")
         if not (math.isfinite(args.freeze_kill) and args.freeze_kill >= args.freeze_limit):
             raise ConfigError(
                 "--freeze-kill", str(args.freeze_kill), "must be finite and >= --freeze-limit"
@@ -309,6 +320,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         freeze_limit=args.freeze_limit,
         freeze_kill=args.freeze_kill,
         agent_process=args.agent_process,
+        agent_nice=args.agent_nice,
         secure=args.secure,
         run_dir=args.run_dir,
         faults=faults,

@@ -19,6 +19,7 @@ BDI agent's plans, replans, forecast-triggered repairs and search rounds, and th
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import os
 import shutil
 import signal
@@ -42,6 +43,7 @@ from cbdi.launcher.services import plan_services
 from cbdi.launcher.specs import run_specs
 from cbdi.launcher.summary import RunSummary, collect_stats, count_actions, count_plans, settle
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
+from cbdi.runtime.parent import NICE_ENV
 from cbdi.security import (
     RunSecrets,
     create_secrets,
@@ -84,6 +86,18 @@ class LaunchOptions:
     run_dir: str = ""
     # Faults to inject (`--fault`, `cbdi.runtime.fault`), as `CBDI_FAULT` says them.
     faults: str = ""
+    # The agents' processes run at this niceness (`CBDI_NICE`, 0 to 19) and the shared
+    # ones (router, world, monitor) at the launcher's: on a machine with too little CPU
+    # for every robot, the bus and the world keep pace and the robots slow down.
+    agent_nice: int = 5
+
+
+def _niced(spec: ProcessSpec, nice: int) -> ProcessSpec:
+    """`spec`, told to run at niceness `nice` if it is an agent's (`robot1/agent`,
+    `robot1/planner`; not the router, world or monitor)."""
+    if nice <= 0 or "/" not in spec.service:
+        return spec
+    return dataclasses.replace(spec, env={**spec.env, NICE_ENV: str(nice)})
 
 
 class _Liveliness:
@@ -152,7 +166,7 @@ async def _launch(
     stalls = f"{state_dir}/stall"  # each process's stall evidence, for the watchdog
     os.makedirs(stalls, exist_ok=True)
     procs = [
-        ManagedProcess(spec, opts.restart, say, f"{stalls}/{k}.heartbeat")
+        ManagedProcess(_niced(spec, opts.agent_nice), opts.restart, say, f"{stalls}/{k}.heartbeat")
         for k, spec in enumerate(specs)
     ]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]

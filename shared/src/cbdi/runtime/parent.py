@@ -22,7 +22,15 @@ import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-__all__ = ["PARENT_ENV", "ParentGuard", "child_env", "die_with_parent", "guard_parent"]
+__all__ = [
+    "NICE_ENV",
+    "PARENT_ENV",
+    "ParentGuard",
+    "child_env",
+    "die_with_parent",
+    "guard_parent",
+    "take_niceness",
+]
 
 PARENT_ENV = "CBDI_PARENT_PID"
 _PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
@@ -95,3 +103,24 @@ def guard_parent(env: Mapping[str, str] | None = None) -> ParentGuard:
     if parent <= 0 or not die_with_parent():
         return ParentGuard()
     return ParentGuard(parent)
+
+
+NICE_ENV = "CBDI_NICE"  # the niceness the launcher asks an agent's process to run at
+
+
+def take_niceness(env: Mapping[str, str] | None = None) -> int:
+    """Run at the niceness the launcher asked for (`CBDI_NICE`, 1 to 19: an agent's
+    process yields the CPU to the router and the world); return it (0: none asked, or
+    not a niceness). Call before any thread starts: threads inherit it."""
+    value = (os.environ if env is None else env).get(NICE_ENV, "")
+    try:
+        nice = int(value)
+    except ValueError:
+        return 0
+    if not 1 <= nice <= 19:
+        return 0
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, max(os.getpriority(os.PRIO_PROCESS, 0), nice))
+    except OSError:
+        return 0
+    return nice

@@ -34,7 +34,7 @@ from cbdi.errors import CbdiError
 from cbdi.runtime.fault import Fault, parse_faults, planned_fault, strike
 from cbdi.runtime.life import end_cleanly
 from cbdi.runtime.log import Log
-from cbdi.runtime.parent import ParentGuard, guard_parent
+from cbdi.runtime.parent import ParentGuard, guard_parent, take_niceness
 from cbdi.runtime.stall import Stalled, watch_loop
 from cbdi.security.secrets import read_credentials, read_zenoh_settings
 from cbdi.wire.base import encode
@@ -193,6 +193,7 @@ def run_services(services: Sequence[Hosted]) -> int:
     Return the first non-zero exit code of any, else 0.
     """
     guard = guard_parent()
+    take_niceness()  # an agent's process yields the CPU to the bus and the world
     logs = []
     for s in services:
         try:
