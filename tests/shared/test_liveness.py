@@ -234,3 +234,53 @@ def test_an_agents_process_runs_nicer_than_the_shared_ones() -> None:
     env = {**os.environ, NICE_ENV: "7"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert int(out.stdout) == max(base, 7)
+
+
+def test_a_silent_process_is_looked_at_from_outside() -> None:
+    """The launcher reads a silent process's schedstat itself (a starved process's own
+    word comes late): a loop's thread that wants the CPU is starved; one asleep beside a
+    spinning thread (a deadlock) and a stopped process are left to the heartbeats."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
+    from cbdi.launcher.watch import _look_at
+
+    spin = "while True: pass"
+    asleep = (
+        "import threading, time\n"
+        "threading.Thread(target=lambda: exec('while 1: pass'), daemon=True).start()\n"
+        "time.sleep(600)"
+    )
+    verdicts = []
+    for code, stop in ((spin, False), (asleep, False), (spin, True)):
+        child = subprocess.Popen([sys.executable, "-c", code])
+        try:
+            time.sleep(0.3)
+            if stop:
+                os.kill(child.pid, signal.SIGSTOP)
+            spec = ProcessSpec.of("robot1/agent", ["cbdi"], [], {}, hosts=("robot1/planner",))
+            proc = ManagedProcess(spec, RestartPolicy(), lambda *_: None)
+            running = {"router": 10, "robot1/planner": child.pid}
+            dog = Watchdog(2.0, 0.1, kill_after=10.0)
+            _beating(dog, 3.0, running)
+            since: dict[int, tuple[float, tuple[int, int, int]]] = {}
+            _look_at(dog, proc, child.pid, 3.2, since)  # not silent long enough yet
+            assert not since
+            found: list[Frozen | Starved] = []
+            for k in range(31, 51):  # every tick from 3.1 s to 5 s
+                t = k / 10
+                dog.beat("router", 10, t)
+                if k == 48:
+                    time.sleep(0.5)  # what it ran and waited meanwhile
+                if k in (41, 48):  # silent 1.1 s: the clocks now; 1.8 s: what since
+                    _look_at(dog, proc, child.pid, t, since)
+                found += dog.check(t, running)
+            verdicts.append([type(f) for f in found])
+        finally:
+            child.kill()
+            child.wait()
+    assert verdicts == [[Starved], [Frozen], [Frozen]]

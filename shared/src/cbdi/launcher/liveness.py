@@ -130,6 +130,12 @@ class Watchdog:
         self._stalls.pop(service, None)
         self._starved.discard((service, pid))
 
+    def silent_for(self, service: str, pid: int, now: float) -> float:
+        """How long process `pid` of `service` has not been heard beating (0: never heard,
+        or another process)."""
+        heard = self._heard.get(service)
+        return now - heard[1] if heard is not None and heard[0] == pid else 0.0
+
     def _starving(self, service: str, pid: int, now: float) -> Stall | None:
         """The fresh word of `service`'s process `pid` that it is starved, if any."""
         word = self._stalls.get(service)

@@ -29,6 +29,7 @@ from cbdi.wire.common import Heartbeat, ServiceFrozen, ServiceStarved
 __all__ = ["TICK", "watch_heartbeats", "watch_processes"]
 
 TICK = 0.1  # seconds between checks: a freeze is found within the limit of the last beat
+LOOP_WANTED = 0.05  # the share of a silence a starved loop's thread ran or waited to run
 
 
 async def watch_heartbeats(bus: Bus, dog: Watchdog, clock: Clock | None = None) -> None:
@@ -54,12 +55,15 @@ async def watch_processes(
     clock = clock or WallClock()
     by_service = {member: p for p in procs for member in p.spec.members}
     seen: dict[str, float] = {}  # stall file -> the modification time read
+    since: dict[int, tuple[float, tuple[int, int, int]]] = {}  # pid -> when, its clocks
     while True:
         await clock.sleep(dog.tick)
         running = {m: p.pid for p in procs if p.pid and p.running for m in p.spec.members}
         for p in procs:
             if p.stall_file and p.pid and p.running:
                 _read_stall(dog, p, p.pid, clock.now(), seen)
+            if p.pid and p.running:
+                _look_at(dog, p, p.pid, clock.now(), since)
         for frozen in dog.check(clock.now(), running):
             await _act(bus, dog, by_service[frozen.service], frozen)
 
@@ -85,6 +89,64 @@ def _read_stall(
     stall = Stall(beat.stalled_for, beat.loop_cpu, beat.wanted, beat.sending)
     for member in proc.spec.members:
         dog.beat(member, pid, now, stall)
+
+
+def _look_at(
+    dog: Watchdog,
+    proc: ManagedProcess,
+    pid: int,
+    now: float,
+    since: dict[int, tuple[float, tuple[int, int, int]]],
+) -> None:
+    """Look from outside at a process silent for half the limit: what its loop's (main)
+    thread ran and what all its threads ran or waited for a CPU since then, from Linux's
+    schedstat. A starved process's own word (its stall watcher) comes late or not at
+    all, since it gets no CPU to say it; this needs none of it. It only ever tells
+    starved: anything else is left to the process's word and the heartbeats. The loop's
+    thread must have wanted the CPU too (`LOOP_WANTED` of the time): one asleep (a
+    deadlock) beside a thread that spins is frozen, not starved."""
+    silent = max(dog.silent_for(m, pid, now) for m in proc.spec.members)
+    if silent < dog.limit / 2:
+        since.pop(pid, None)
+        return
+    clocks = _clocks(pid)
+    if clocks is None:
+        return
+    if pid not in since:
+        since[pid] = (now, clocks)
+        return
+    then, (ran0, loop0, all0) = since[pid]
+    span = now - then
+    if span < dog.tick:
+        return
+    stall = Stall(silent, (clocks[0] - ran0) / 1e9, (clocks[2] - all0) / 1e9 / span)
+    if stall.starved(dog.limit) and (clocks[1] - loop0) / 1e9 / span >= LOOP_WANTED:
+        for member in proc.spec.members:
+            dog.beat(member, pid, now, stall)
+
+
+def _clocks(pid: int) -> tuple[int, int, int] | None:
+    """A process's main thread's CPU, its CPU plus run-queue wait, and all its threads'
+    CPU plus run-queue wait, in ns (Linux schedstat); None if it is gone, stopped
+    (SIGSTOP: frozen, not starved) or the system does not say."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            state = f.read().rsplit(b")", 1)[1].split()[0]
+        if state in (b"T", b"t", b"Z"):
+            return None
+        main, loop, total = 0, 0, 0
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            try:
+                with open(f"/proc/{pid}/task/{tid}/schedstat", "rb") as f:
+                    ran, waited, _ = f.read().split()
+            except (OSError, ValueError):
+                continue  # ended meanwhile
+            total += int(ran) + int(waited)
+            if tid == str(pid):
+                main, loop = int(ran), int(ran) + int(waited)
+        return main, loop, total
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen | Starved) -> None:
