@@ -195,6 +195,20 @@ def test_a_goal_over_an_unknown_predicate_is_refused() -> None:
     assert core.search is not None
 
 
+def test_a_bad_request_leaves_the_executing_plan_and_its_search_as_they_were() -> None:
+    core = planner()
+    first = run_first_steps(core, 1)
+    line, search, req = core.line, core.search, core.request
+    bad = SearchRequest(agent="robot1", request_id="s2", kind="start", goal=[["shiny", "p1"]])
+    with pytest.raises(BadRequestError, match="no predicate 'shiny'"):
+        core.on_request(bad)
+    assert (core.line, core.search, core.request) == (line, search, req)
+    # and the executing plan is still forecast and repaired
+    out = core.on_beliefs(beliefs(blocked=("c_3_0",)), 1.0)
+    report = next(m for m in out if isinstance(m, ForecastReport))
+    assert report.plan_id == first.plan_id and report.kind == "fails_after_committed"
+
+
 def test_a_goal_behind_a_person_is_blocked_one_behind_a_bin_unsolvable() -> None:
     core = ContinualPlanner(
         "robot1", DOMAIN, PlanningSettings(round_interval=0), transients=Transients(["free"])

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from cbdi.runtime.log import Log
-from cbdi.runtime.stall import Counters, Resumed, Stalled, StallJudge, watch_loop
+from cbdi.runtime.stall import Counters, LoopTurns, Resumed, Stalled, StallJudge, watch_loop
 
 
 def _c(loop: float, process: float = 0.0, wanted: float | None = None) -> Counters:
@@ -163,3 +163,39 @@ def test_a_pulse_stuck_on_a_congested_bus_does_not_stop_the_watcher(
     while not calls and time.monotonic() < deadline:
         time.sleep(0.01)
     assert calls == ["cbdi/heartbeat/world"]  # one send in flight, the others skipped
+
+
+def test_the_loops_turns_tell_how_long_its_own_code_held_it_not_how_long_it_slept() -> None:
+    turns = LoopTurns()
+    log = Log("robot1/planner", stream=io.StringIO())
+
+    async def run() -> tuple[tuple[float, float], tuple[float, float]]:
+        watch = asyncio.get_running_loop().create_task(
+            watch_loop(log, limit=5.0, period=0.01, turns=turns)
+        )
+        await asyncio.sleep(0.05)
+        before = time.monotonic()
+        time.sleep(0.15)  # the loop stands, its thread asleep: late, not held
+        await asyncio.sleep(0.05)
+        asleep = turns.worst(before)
+        before = time.monotonic()
+        busy = time.thread_time() + 0.15
+        while time.thread_time() < busy:  # the loop's own code runs 150 ms of CPU
+            pass
+        await asyncio.sleep(0.05)
+        watch.cancel()
+        return asleep, turns.worst(before)
+
+    (held_asleep, late_asleep), (held_busy, late_busy) = asyncio.run(run())
+    assert held_asleep < 0.05 and late_asleep >= 0.1
+    assert held_busy >= 0.14 and late_busy >= 0.1
+    assert turns.worst(time.monotonic()) == (0.0, 0.0)  # nothing since
+
+
+def test_turns_keep_only_the_latest() -> None:
+    turns = LoopTurns(keep=2)
+    for at, held in ((1.0, 0.5), (2.0, 0.1), (3.0, 0.2)):
+        turns.turn(at, held, -1.0)
+    assert turns.worst(0.0) == (0.2, 0.0)  # the first is forgotten, no negative lateness
+    with pytest.raises(ValueError):
+        LoopTurns(keep=0)

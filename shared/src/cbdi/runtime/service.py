@@ -18,6 +18,7 @@ import math
 import os
 import signal
 import threading
+import time
 import traceback
 from collections.abc import Awaitable, Callable, Coroutine, Sequence
 from dataclasses import dataclass, field
@@ -35,7 +36,7 @@ from cbdi.runtime.fault import Fault, parse_faults, planned_fault, strike
 from cbdi.runtime.life import end_cleanly
 from cbdi.runtime.log import Log
 from cbdi.runtime.parent import ParentGuard, guard_parent, take_niceness
-from cbdi.runtime.stall import Stalled, watch_loop
+from cbdi.runtime.stall import LoopTurns, Stalled, watch_loop
 from cbdi.security.secrets import read_credentials, read_zenoh_settings
 from cbdi.wire.base import encode
 from cbdi.wire.common import ErrorReport, Heartbeat
@@ -44,6 +45,7 @@ from cbdi.wire.world import Tick
 __all__ = ["Hosted", "ServiceContext", "ServiceSettings", "run_service", "run_services"]
 
 MAX_PENDING_REPORTS = 1000  # error reports waiting to be published
+MARK = 0.1  # s between turns of the stall watcher's marker, at most (heartbeat / 2 if less)
 
 
 @dataclass(frozen=True)
@@ -114,6 +116,7 @@ class ServiceContext:
         self.bus = bus
         self.log = log
         self.counters: collections.Counter[str] = collections.Counter()
+        self.turns: LoopTurns | None = None  # the loop's turns (`Heartbeat.held`, `late`)
         self.exit_code = 0
         self._tg: asyncio.TaskGroup | None = None
         self._stopping = asyncio.Event()
@@ -247,12 +250,17 @@ async def _run(services: Sequence[Hosted], logs: Sequence[Log], guard: ParentGua
     watch = None
     if limit:
         pulse = _stall_pulse(contexts) if beat > 0 else None
+        turns = LoopTurns()
+        for ctx in contexts:
+            ctx.turns = turns
         watcher = watch_loop(
             logs[0],
             limit,
+            period=min(MARK, beat / 2) if beat > 0 else MARK,
             pulse=pulse,
             every=beat or None,
             sending=lambda: any(ctx.bus.sending > 0 for ctx in contexts),
+            turns=turns,
         )
         watch = loop.create_task(watcher, name="stall-watch")
     try:
@@ -392,8 +400,13 @@ async def _beat(ctx: ServiceContext, period: float, clock: Clock) -> None:
     """Send a heartbeat every `period` s while this loop turns (dropped under congestion:
     a late one is worth nothing)."""
     pid, key = os.getpid(), keys.heartbeat(ctx.service)
+    last = time.monotonic()
     for beat in itertools.count():
-        await ctx.bus.publish(key, encode(Heartbeat(service=ctx.service, pid=pid, beat=beat)))
+        now = time.monotonic()
+        held, late = ctx.turns.worst(last) if ctx.turns is not None else (0.0, 0.0)
+        last = now
+        msg = Heartbeat(service=ctx.service, pid=pid, beat=beat, held=held, late=late)
+        await ctx.bus.publish(key, encode(msg))
         ctx.counters["heartbeats"] += 1
         await clock.sleep(period)
 

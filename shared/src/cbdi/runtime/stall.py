@@ -31,12 +31,21 @@ import sys
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from cbdi.runtime.log import Log
 
-__all__ = ["Counters", "Resumed", "StallJudge", "Stalled", "read_counters", "watch_loop"]
+__all__ = [
+    "Counters",
+    "LoopTurns",
+    "Resumed",
+    "StallJudge",
+    "Stalled",
+    "read_counters",
+    "watch_loop",
+]
 
 FRAMES = 6  # innermost frames of the loop's thread named in `loop_stalled`
 
@@ -147,6 +156,32 @@ class StallJudge:
         return Stalled(round(now - turned, 3), loop_cpu, wanted, first)
 
 
+class LoopTurns:
+    """The loop's recent turns as its marker saw them: per turn, the CPU the loop's own
+    thread ran since the turn before (`held`: what the code between two turns cost, the
+    longest any one piece of work held the loop at most, whatever the machine's load)
+    and how much later than asked the marker woke (`late`: wall time, the load's share
+    included). Kept for the last `keep` turns; read by the heartbeats (`worst`)."""
+
+    def __init__(self, keep: int = 512) -> None:
+        if keep < 1:
+            raise ValueError(f"keep must be at least 1, got {keep}")
+        self._turns: deque[tuple[float, float, float]] = deque(maxlen=keep)
+
+    def turn(self, at: float, held: float, late: float) -> None:
+        """Note a turn of the marker at `at` (monotonic s)."""
+        self._turns.append((at, max(0.0, held), max(0.0, late)))
+
+    def worst(self, since: float) -> tuple[float, float]:
+        """The most `held` and `late` of the turns after `since` (0.0 each: none)."""
+        held = late = 0.0
+        for at, h, lt in reversed(self._turns):
+            if at <= since:
+                break
+            held, late = max(held, h), max(late, lt)
+        return round(held, 4), round(late, 4)
+
+
 def _where(thread: int) -> str:
     frame = sys._current_frames().get(thread)
     if frame is None:
@@ -199,10 +234,12 @@ async def watch_loop(
     pulse: Callable[[Stalled], None] | None = None,
     every: float | None = None,
     sending: Callable[[], bool] | None = None,
+    turns: LoopTurns | None = None,
 ) -> None:
     """Mark the loop's turns every `period` s; a daemon thread logs its stalls and hands
     the evidence to `pulse` (called in that thread) every `every` s while one lasts;
-    `sending` tells whether the loop is in a send on the bus (`Bus.sending`)."""
+    `sending` tells whether the loop is in a send on the bus (`Bus.sending`); each turn
+    goes to `turns` (what the loop's thread ran since the last, how late it came)."""
     judge = StallJudge(limit, every if pulse is not None else None)
     loop_thread = threading.get_ident()
     clock = _cpu_clock(loop_thread)
@@ -239,8 +276,14 @@ async def watch_loop(
 
     threading.Thread(target=watch, name="stall-watch", daemon=True).start()
     try:
+        cpu = time.thread_time()
         while True:
-            turned[0] = time.monotonic()
+            now = time.monotonic()
+            if turns is not None:
+                ran = time.thread_time()
+                turns.turn(now, ran - cpu, now - turned[0] - period)
+                cpu = ran
+            turned[0] = now
             await asyncio.sleep(period)
     finally:
         done.set()

@@ -116,6 +116,13 @@ class Heartbeat(Message, frozen=True, tag="cbdi.Heartbeat/1"):
     unknown), and whether the loop stands in a send on the bus (`sending`: waiting for
     room on a congested network). A process that wanted the CPU and got little is
     starved, one waiting for the network congested; neither is frozen.
+
+    Sent by the loop, it says how the loop kept pace since the last heartbeat: `held`,
+    the most CPU the loop's own thread ran between two turns of the stall watcher's
+    marker (which turns every `min(0.1, heartbeat / 2)` s): at most what one piece of
+    the service's code held the loop for, the same on a loaded machine as on an idle
+    one; and `late`, the most the marker woke later than asked (wall time: the load's
+    and other threads' share included).
     """
 
     service: Symbol
@@ -125,6 +132,8 @@ class Heartbeat(Message, frozen=True, tag="cbdi.Heartbeat/1"):
     loop_cpu: NonNegative = 0.0
     wanted: Share | None = None
     sending: bool = False
+    held: NonNegative = 0.0
+    late: NonNegative = 0.0
 
 
 class ServiceStarved(Message, frozen=True, tag="cbdi.ServiceStarved/1"):

@@ -30,6 +30,7 @@ from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.problem import (
     GoalError,
     beliefs_from_problem,
+    check_goal,
     goal_of,
     problem_from_beliefs,
 )
@@ -137,6 +138,8 @@ class ContinualPlanner:
         self.repair_trigger = ""
         self.ids = count(1)
         self.published: set[str] = set()  # every plan id sent, for the statuses' sake
+        # A request's problem `warm` read ahead: (its text, its beliefs and goal).
+        self._read: tuple[str, tuple[BeliefSet, list[list[str]]]] | None = None
 
     @property
     def search(self) -> Search | None:
@@ -169,10 +172,19 @@ class ContinualPlanner:
         find both built and the event loop is not held up by either (on campus-30x30 a
         grounding takes about 200 ms, a graph 100 ms); errors are left for them to
         report."""
-        goal = self.goal_of(req) if req is not None else None
-        if goal is None and self.request is not None:
-            goal = [list(g) for g in self.request.goal]
-        if not goal or (req is not None and req.problem):
+        goal: list[list[str]] | None
+        if req is not None and req.problem and req.kind != "cancel":
+            try:  # a request's own problem: read here, not on the loop (campus: 100 ms)
+                read = self._read_problem(req)
+            except (GoalError, PlannerError):
+                return
+            self._read = (req.problem, read)
+            beliefs, goal = read
+        else:
+            goal = self.goal_of(req) if req is not None else None
+            if goal is None and self.request is not None:
+                goal = [list(g) for g in self.request.goal]
+        if not goal:
             return
         self.transients.see(beliefs)
         with contextlib.suppress(GoalError, PlannerError):
@@ -214,6 +226,8 @@ class ContinualPlanner:
         that does not parse or a goal the domain cannot express.
         """
         try:
+            if not req.problem:
+                check_goal(self.domain, req.goal)  # before the searching state changes
             return self._on_request(self._with_problem(req))
         except Unsolvable as exc:
             # Nothing reaches the goal from these beliefs (grounding): a failed search,
@@ -236,13 +250,19 @@ class ContinualPlanner:
         """Take a request's own PDDL problem as the beliefs (and goal, if it has none)."""
         if not req.problem or req.kind == "cancel":
             return req
+        read, self._read = self._read, None
+        beliefs, goal = read[1] if read and read[0] == req.problem else self._read_problem(req)
+        self.beliefs = beliefs
+        self.transients.see(beliefs)
+        return replace(req, goal=goal, problem="")
+
+    def _read_problem(self, req: SearchRequest) -> tuple[BeliefSet, list[list[str]]]:
+        """The beliefs and goal of a request's own PDDL problem (its goal if it has one)."""
         problem = parse_problem(req.problem, self.domain, f"request {req.request_id}")
         goal = [list(g) for g in req.goal] or goal_of(problem)
         beliefs = beliefs_from_problem(problem)
         problem_from_beliefs(self.domain, beliefs, goal)  # the goal fits the domain
-        self.beliefs = beliefs
-        self.transients.see(beliefs)
-        return replace(req, goal=goal, problem="")
+        return beliefs, goal
 
     def _on_request(self, req: SearchRequest) -> list[Message]:
         if req.kind == "cancel":

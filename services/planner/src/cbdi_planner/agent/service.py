@@ -480,12 +480,12 @@ class OnlinePlannerService(_Epochs):
                 req, self.deferred = self.deferred, None
                 await self.start(keys.planner_requests(core.agent), req)
         elif isinstance(msg, SearchRequest):
+            try:  # before anything: a bad request leaves the search in progress alone
+                checked(self.core.domain, msg)
+            except BadRequestError as exc:
+                await self.send([core._status(msg.request_id, "failed", exc.reason)])
+                raise
             if waits(msg, self.beliefs_in, self.has_beliefs):
-                try:
-                    checked(self.core.domain, msg)
-                except BadRequestError as exc:
-                    await self.send([core._status(msg.request_id, "failed", exc.reason)])
-                    raise
                 self.deferred = msg  # plan from the beliefs it was asked from, once here
                 return
             await self.start(key, msg)
