@@ -8,6 +8,7 @@ every shipped recycling problem, on the IPC temporal problems the planner solves
 
 from __future__ import annotations
 
+import math
 import os
 import random
 from pathlib import Path
@@ -24,7 +25,8 @@ from cbdi_planner.heuristic import RelaxedPlanGraph
 from cbdi_planner.pddl import parse_domain, parse_problem
 from cbdi_planner.search import Budget, SearchResult, search
 from cbdi_planner.state import apply_end, apply_start, apply_til, initial_state
-from cbdi_planner.task import Task
+from cbdi_planner.stn import END, INST, START, TIL, Future, Oracle, Step, Timeline
+from cbdi_planner.task import Snap, Task
 
 REPO = Path(__file__).resolve().parents[2]
 RECYCLING = REPO / "domains/recycling"
@@ -187,3 +189,61 @@ def test_sets_iterate_in_cpythons_order(keys: list[int]) -> None:
     for key in keys:
         expected.add(key)
     assert core.set_order(keys) == list(expected)
+
+
+def _snap(bits: list[int]) -> Snap:
+    """A happening touching the facts and variables `bits` picks (few, so that steps
+    often interfere; bits 64 on fold onto bits 0 on in the compiled core's quick test)."""
+    masks = [0] * 6
+    for i, bit in enumerate(bits):
+        masks[i % 6] |= 1 << bit
+    reads, writes, add, dele, num_reads, num_writes = masks
+    return Snap(0, 0, (), add, dele, (), (), reads, writes, num_reads, num_writes)
+
+
+_STEP = st.tuples(
+    st.sampled_from(["start", "end", "til", "inst"]),
+    st.lists(st.sampled_from([0, 1, 2, 3, 64, 65, 66, 67]), max_size=8),
+    st.floats(0.0, 5.0),
+    st.floats(0.0, 5.0) | st.just(math.inf),
+)
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.lists(_STEP, min_size=1, max_size=40), st.integers(0, 3))
+def test_random_timelines_are_the_same(
+    plan: list[tuple[str, list[int], float, float]], deadlines: int
+) -> None:
+    """Any sequence of starts, ends, timed literals and instants, with running actions'
+    ends and timed literals still to come: the same schedules (or the same refusal)."""
+    module = compiled("compiled")
+    assert module is not None
+    oracle = Oracle(module)
+    lines = [Timeline.start(0.01), Timeline.start(0.01, oracle)]
+    running: list[tuple[int, Snap, float, float]] = []  # start step, end snap, bounds
+    coming = [(2.0 + 3 * i, _snap([i, i + 64 if i < 6 else i])) for i in range(deadlines)]
+    for kind, bits, low, high in plan:
+        snap = _snap(bits)
+        low, high = min(low, high), max(low, high)
+        n = len(lines[0].steps)
+        if kind == "end" and running:
+            start, snap, low, high = running[0]
+            step = Step(END, 0, snap, start, low, high)
+            after = running[1:]
+        elif kind == "til" or (kind == "end" and coming):
+            when, snap = coming[0] if coming else (low, snap)
+            step = Step(TIL, 0, snap, -1, when, when)
+            after, coming = running, coming[1:]
+        elif kind == "start":
+            step = Step(START, 0, snap, -1, low, high)
+            after = [*running, (n, _snap([b + 1 for b in bits]), low, high)]
+        else:
+            step, after = Step(INST, 0, snap), running
+        future = Future(tuple((s, e) for s, e, _, _ in after), tuple(coming))
+        out = [line.extend(step, future) for line in lines]
+        assert (out[0] is None) == (out[1] is None), (kind, n)
+        if out[0] is None or out[1] is None:
+            continue
+        assert list(out[0].times) == list(out[1].times) and out[0].span == out[1].span
+        assert [list(e) for e in out[0].net.edges] == [list(e) for e in out[1].net.edges]
+        lines, running = [out[0], out[1]], after

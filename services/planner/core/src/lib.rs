@@ -16,6 +16,7 @@
 
 mod extract;
 mod pyset;
+mod starts;
 
 use extract::{extract, Ops, Relaxed};
 use pyo3::exceptions::PyValueError;
@@ -581,6 +582,13 @@ struct Touches {
     num_reads: Vec<u32>,
     num_writes: Vec<u32>,
     num_any: Vec<u32>,
+    /// Each list above folded into 64 bits (bit `x % 64` for each `x`), in that order:
+    /// two lists whose folds share no bit share no element.
+    folds: [u64; 7],
+}
+
+fn fold(bits: &[u32]) -> u64 {
+    bits.iter().fold(0, |acc, &x| acc | 1u64 << (x % 64))
 }
 
 /// Whether two sorted lists share an element.
@@ -598,6 +606,12 @@ fn meet(a: &[u32], b: &[u32]) -> bool {
 
 /// `stn.interferes(a, b)`: whether two happenings must be ordered.
 fn interferes(a: &Touches, b: &Touches) -> bool {
+    let (f, g) = (&a.folds, &b.folds);
+    if (f[1] & g[0]) | (f[0] & g[1]) | (f[2] & g[3]) | (f[3] & g[2]) | (f[5] & g[6]) | (f[4] & g[5])
+        == 0
+    {
+        return false; // the exact test below would find no shared element
+    }
     meet(&a.writes, &b.reads)
         || meet(&a.reads, &b.writes)
         || meet(&a.add, &b.dele)
@@ -639,7 +653,7 @@ impl Interference {
         num_writes: Vec<u32>,
     ) -> usize {
         let num_any = sorted([num_reads.clone(), num_writes.clone()].concat());
-        let touches = Touches {
+        let mut touches = Touches {
             reads: sorted(reads),
             writes: sorted(writes),
             add: sorted(add),
@@ -647,7 +661,17 @@ impl Interference {
             num_reads: sorted(num_reads),
             num_writes: sorted(num_writes),
             num_any,
+            folds: [0; 7],
         };
+        touches.folds = [
+            fold(&touches.reads),
+            fold(&touches.writes),
+            fold(&touches.add),
+            fold(&touches.dele),
+            fold(&touches.num_reads),
+            fold(&touches.num_writes),
+            fold(&touches.num_any),
+        ];
         let mut snaps = self.snaps.write().expect("interference lock");
         snaps.push(touches);
         snaps.len() - 1
@@ -852,9 +876,7 @@ impl Schedule {
                 }
             }
         }
-        if !out.settle(n, &waits, eps) {
-            return None;
-        }
+        let touched = out.settle(n, &waits, eps)?;
         if let Some((_, deadlines)) = future {
             for &(when, snap) in deadlines {
                 let late = interfering(snaps, &out.codes, snap)
@@ -865,26 +887,31 @@ impl Schedule {
                 }
             }
         }
-        // Python's max(..., default=0.0) over the times of the steps that are not TILs.
-        let mut span: Option<f64> = None;
-        for (k, &t) in out.times.iter().enumerate() {
-            if out.kinds[k] != TIL {
-                span = Some(match span {
-                    Some(best) if t > best => t,
-                    Some(best) => best,
-                    None => t,
-                });
+        // Python's max(..., default=0.0) over the times of the steps that are not TILs:
+        // times only grow (and are not negative), so the old span and the times that
+        // changed (`touched` on) give it.
+        let mut span = self.span;
+        for k in touched..out.times.len() {
+            if out.kinds[k] != TIL && out.times[k] > span {
+                span = out.times[k];
             }
         }
-        out.span = span.unwrap_or(0.0);
+        out.span = span;
         Some(out)
     }
 
-    /// `stn._settle`: propagate earliest times from step `first` on; false on a
-    /// positive cycle.
-    fn settle(&mut self, mut first: usize, waits: &[Wait], eps: f64) -> bool {
+    /// `stn._settle`: propagate earliest times from step `first` on; None on a positive
+    /// cycle, else the first step whose time may have changed.
+    ///
+    /// The schedule was consistent before (every bound held), and times only grow: a
+    /// step's own bound (a timed literal's time, an action's longest duration, checked
+    /// at its end) can break only where its time changed, so only those are checked
+    /// (the Python reference checks them all, and finds the same).
+    fn settle(&mut self, mut first: usize, waits: &[Wait], eps: f64) -> Option<usize> {
         let n = self.kinds.len();
+        let mut touched = first;
         for _ in 0..n + 1 {
+            touched = touched.min(first);
             for k in first..n {
                 let mut value = self.times[k];
                 for e in self.edge_off[k]..self.edge_off[k + 1] {
@@ -896,10 +923,10 @@ impl Schedule {
                 self.times[k] = value;
             }
             let mut lowest = n;
-            for k in 0..n {
+            for k in touched..n {
                 if self.kinds[k] == TIL {
                     if self.times[k] > self.highs[k] + TOL {
-                        return false;
+                        return None;
                     }
                 } else if self.kinds[k] == END {
                     let p = self.partners[k] as usize;
@@ -924,11 +951,11 @@ impl Schedule {
                 }
             }
             if lowest == n {
-                return true;
+                return Some(touched);
             }
             first = lowest;
         }
-        false
+        None
     }
 }
 
@@ -949,5 +976,6 @@ fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Graph>()?;
     m.add_class::<Interference>()?;
     m.add_class::<Schedule>()?;
+    m.add_class::<starts::Starts>()?;
     Ok(())
 }

@@ -91,6 +91,10 @@ class Expander:
             need = self._needs[action.index]
             low = (need & -need).bit_length() - 1
             self._by_fact.setdefault(low, []).append(action.index)
+        # Compiled: the same candidates, the needs tested there too.
+        self._starts = (
+            module.Starts([_bits(n) for n in self._needs]) if module is not None else None
+        )
         self._til_snaps = [
             Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils
         ]
@@ -150,9 +154,10 @@ class Expander:
                 step = Step(TIL, state.til, self._til_snaps[state.til], -1, when, when)
                 yield self._move(new, node.running, ((step, new, node.running),))
         facts, needs = state.facts, self._needs
+        tested = self._starts is not None and not helpful_only  # their needs hold
         for index in self._candidates(node, helpful_only):
             action = task.actions[index]
-            if needs[index] & ~facts:
+            if not tested and needs[index] & ~facts:
                 continue
             new = apply_start(task, state, action)
             if new is None:
@@ -198,6 +203,9 @@ class Expander:
         """Return, in index order, the actions that may start in `node` (helpful ones)."""
         if helpful_only:
             return sorted(a for kind, a in node.helpful if kind in (START, INST))
+        if self._starts is not None:  # those whose needs hold, in index order
+            facts = node.state.facts
+            return self._starts.candidates(facts.to_bytes((facts.bit_length() + 7) // 8, "little"))
         by_fact, facts = self._by_fact, node.state.facts
         out = list(by_fact.get(-1, ()))
         while facts:
@@ -224,3 +232,13 @@ class Expander:
     def dead(node: Node) -> bool:
         """Tell whether the heuristic proved the node a dead end."""
         return node.h >= INFINITE
+
+
+def _bits(mask: int) -> list[int]:
+    """The positions of the set bits of `mask`."""
+    out = []
+    while mask:
+        low = mask & -mask
+        out.append(low.bit_length() - 1)
+        mask ^= low
+    return out
