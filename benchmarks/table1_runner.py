@@ -30,6 +30,7 @@ from typing import TextIO
 from table1_model import Run, Task, run_from_summary, summary_of, with_reason
 
 from cbdi.agentfile import PlanningSettings
+from cbdi.launcher.run import ROUTER_NOT_LISTENING
 
 __all__ = [
     "CBDI",
@@ -49,6 +50,7 @@ __all__ = [
 CBDI = str(Path(sys.executable).parent / "cbdi")
 REALTIME_ARGS = ("--speed", "1", "--no-lockstep")
 GRACE = 30.0  # seconds past `cbdi up --timeout` before the harness kills the group
+PORT_TRIES = 3  # runs of a task whose router could not take its port, at most
 
 Runner = Callable[[Task], Run]
 
@@ -210,7 +212,19 @@ class PortPool:
 
 
 def run_task(task: Task, options: UpOptions, ports: PortPool) -> Run:
-    """Run one task with `cbdi up --json`; a run without a summary says why."""
+    """Run one task with `cbdi up --json`; a run without a summary says why.
+
+    A run whose router could not take its port (another program on the machine took it
+    between the lease and the bind) never started: it runs again on another port, up
+    to `PORT_TRIES` times."""
+    for _ in range(PORT_TRIES):
+        run = _run_once(task, options, ports)
+        if not run.reason.startswith(ROUTER_NOT_LISTENING):
+            break
+    return run
+
+
+def _run_once(task: Task, options: UpOptions, ports: PortPool) -> Run:
     with ports.lease() as port:
         argv = up_argv(task, options, port)
         code, out, err, wall = execute(argv, options.run_timeout + GRACE)

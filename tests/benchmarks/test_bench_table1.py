@@ -310,6 +310,32 @@ def test_ports_held_by_runs_are_never_handed_out_twice() -> None:
         assert len({a, b, c}) == 3
 
 
+def test_a_run_whose_router_lost_its_port_runs_again_on_another(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import json
+
+    ports: list[int] = []
+    taken = {**SUMMARY, "result": "failed", "reason": "our router could not listen on tcp/x"}
+
+    def execute(argv: list[str], timeout: float) -> tuple[int, str, str, float]:
+        ports.append(int(argv[argv.index("--port") + 1]))
+        return (
+            (1 if len(ports) == 1 else 0),
+            json.dumps(taken if len(ports) == 1 else SUMMARY),
+            "",
+            1.0,
+        )
+
+    monkeypatch.setattr(runner, "execute", execute)
+    run = runner.run_task(model.Task(S412, "online", 1), runner.UpOptions(), runner.PortPool())
+    assert run.result == "done" and len(ports) == 2
+    always = lambda argv, timeout: (1, json.dumps(taken), "", 1.0)  # noqa: E731
+    monkeypatch.setattr(runner, "execute", always)
+    run = runner.run_task(model.Task(S412, "online", 1), runner.UpOptions(), runner.PortPool())
+    assert run.result == "failed" and "could not listen" in run.reason  # tried, then said
+
+
 def test_execute_kills_the_whole_process_group_at_its_limit(tmp_path: Path) -> None:
     pid_file = tmp_path / "child.pid"
     script = f"sleep 60 & echo $! > {pid_file}; wait"

@@ -55,7 +55,11 @@ from cbdi.security.policy import LAUNCHER
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, Tick
 
-__all__ = ["LaunchOptions", "RunSummary", "launch"]
+__all__ = ["ROUTER_NOT_LISTENING", "LaunchOptions", "RunSummary", "launch"]
+
+# How a run that never started because its router could not take its port is told
+# (`run.reason` begins with it): nothing ran, the same run may be tried on another port.
+ROUTER_NOT_LISTENING = "our router could not listen on"
 
 
 @dataclass(frozen=True)
@@ -308,7 +312,7 @@ async def _router_is_ours(router: ManagedProcess, endpoint: str, opts: LaunchOpt
     while not any("event=routing" in line for line in router.tail):
         if router.failed.is_set() or clock.now() > deadline:
             tail = " | ".join(router.tail) or "no output"
-            raise CbdiError(f"our router could not listen on {endpoint} (port taken?): {tail}")
+            raise CbdiError(f"{ROUTER_NOT_LISTENING} {endpoint} (port taken?): {tail}")
         await clock.sleep(0.05)
 
 
