@@ -16,12 +16,14 @@
 
 mod extract;
 mod pyset;
+mod schedule;
 mod starts;
 
 use extract::{extract, Ops, Relaxed};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyTuple, PyTupleMethods};
+use schedule::Schedule;
 use std::collections::HashMap;
 
 /// A compiled numeric expression (`cbdi_planner.task.NExpr`).
@@ -574,7 +576,7 @@ impl Graph {
 }
 
 /// What a happening reads and writes (`cbdi_planner.task.Snap`), as sorted bit positions.
-struct Touches {
+pub(crate) struct Touches {
     reads: Vec<u32>,
     writes: Vec<u32>,
     add: Vec<u32>,
@@ -605,7 +607,7 @@ fn meet(a: &[u32], b: &[u32]) -> bool {
 }
 
 /// `stn.interferes(a, b)`: whether two happenings must be ordered.
-fn interferes(a: &Touches, b: &Touches) -> bool {
+pub(crate) fn interferes(a: &Touches, b: &Touches) -> bool {
     let (f, g) = (&a.folds, &b.folds);
     if (f[1] & g[0]) | (f[0] & g[1]) | (f[2] & g[3]) | (f[3] & g[2]) | (f[5] & g[6]) | (f[4] & g[5])
         == 0
@@ -623,8 +625,8 @@ fn interferes(a: &Touches, b: &Touches) -> bool {
 /// The happenings of a search, each under a code, and which of them interfere
 /// (`cbdi_planner.stn`: which earlier steps a step must follow).
 #[pyclass(frozen, module = "cbdi_planner_core")]
-struct Interference {
-    snaps: std::sync::RwLock<Vec<Touches>>,
+pub(crate) struct Interference {
+    pub(crate) snaps: std::sync::RwLock<Vec<Touches>>,
 }
 
 fn sorted(mut bits: Vec<u32>) -> Vec<u32> {
@@ -707,256 +709,6 @@ fn interfering(snaps: &[Touches], steps: &[usize], with: usize) -> Vec<usize> {
         .filter(|(_, &code)| interferes(&snaps[code], b))
         .map(|(k, _)| k)
         .collect()
-}
-
-const END: u8 = 1;
-const TIL: u8 = 3;
-const TOL: f64 = 1e-9;
-
-/// The simple temporal network of a partial plan (`cbdi_planner.stn.Timeline`'s
-/// numbers): each step's kind, partner, upper bound and snap code, its incoming
-/// ordering edges (flat: the edges of step k are `edge_off[k]..edge_off[k + 1]`) and
-/// the earliest consistent times. Extending copies it: a search keeps every node's.
-#[pyclass(frozen, module = "cbdi_planner_core")]
-#[derive(Clone, Default)]
-struct Schedule {
-    kinds: Vec<u8>,
-    partners: Vec<i64>,
-    highs: Vec<f64>,
-    codes: Vec<usize>,
-    edge_off: Vec<usize>,
-    edge_src: Vec<usize>,
-    edge_w: Vec<f64>,
-    times: Vec<f64>,
-    #[pyo3(get)]
-    span: f64,
-}
-
-/// The happenings certain to come after a step: `(start step, end snap code)` of each
-/// running action, `(time, snap code)` of each timed literal still to happen.
-type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
-
-/// A running action's future end: its start step, its bound, the steps it must follow.
-struct Wait {
-    start: usize,
-    high: f64,
-    after: Vec<usize>,
-}
-
-#[pymethods]
-impl Schedule {
-    #[new]
-    fn new() -> Self {
-        Schedule {
-            edge_off: vec![0],
-            ..Default::default()
-        }
-    }
-
-    /// The earliest time of each step.
-    #[getter]
-    fn times(&self) -> Vec<f64> {
-        self.times.clone()
-    }
-
-    /// Each step's incoming edges `(earlier step, least distance)`.
-    #[getter]
-    fn edges(&self) -> Vec<Vec<(usize, f64)>> {
-        (0..self.kinds.len())
-            .map(|k| {
-                (self.edge_off[k]..self.edge_off[k + 1])
-                    .map(|e| (self.edge_src[e], self.edge_w[e]))
-                    .collect()
-            })
-            .collect()
-    }
-
-    /// `Timeline.extend`: the schedule with a step appended (its kind, partner, bounds
-    /// and snap code), or None if inconsistent. `future` (None: not checked) holds the
-    /// happenings certain to come: `(start step, end snap code)` of each running action,
-    /// `(time, snap code)` of each timed literal still to happen.
-    #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (oracle, kind, partner, low, high, code, future, epsilon))]
-    fn extend(
-        &self,
-        py: Python<'_>,
-        oracle: &Interference,
-        kind: u8,
-        partner: i64,
-        low: f64,
-        high: f64,
-        code: usize,
-        future: Option<Coming>,
-        epsilon: f64,
-    ) -> PyResult<Option<Schedule>> {
-        let n = self.kinds.len();
-        let known = oracle.snaps.read().expect("interference lock").len();
-        let ends_ok = future.as_ref().is_none_or(|(ends, deadlines)| {
-            ends.iter().all(|&(s, c)| s <= n && c < known)
-                && deadlines.iter().all(|&(_, c)| c < known)
-        });
-        let partner_ok = kind != END || (partner >= 0 && (partner as usize) < n);
-        if code >= known || !ends_ok || !partner_ok {
-            return Err(PyValueError::new_err(
-                "a step or happening is unknown to the schedule",
-            ));
-        }
-        Ok(py.detach(|| {
-            let snaps = oracle.snaps.read().expect("interference lock");
-            self.extended(
-                &snaps,
-                kind,
-                partner,
-                low,
-                high,
-                code,
-                future.as_ref(),
-                epsilon,
-            )
-        }))
-    }
-}
-
-impl Schedule {
-    #[allow(clippy::too_many_arguments)]
-    fn extended(
-        &self,
-        snaps: &[Touches],
-        kind: u8,
-        partner: i64,
-        low: f64,
-        high: f64,
-        code: usize,
-        future: Option<&Coming>,
-        eps: f64,
-    ) -> Option<Schedule> {
-        let mut out = self.clone();
-        let n = self.kinds.len();
-        let mut incoming: Vec<(usize, f64)> = interfering(snaps, &self.codes, code)
-            .into_iter()
-            .map(|i| (i, eps))
-            .collect();
-        if kind == END {
-            incoming.push((partner as usize, low));
-        }
-        out.kinds.push(kind);
-        out.partners.push(partner);
-        out.highs.push(high);
-        out.codes.push(code);
-        for &(i, w) in &incoming {
-            out.edge_src.push(i);
-            out.edge_w.push(w);
-        }
-        out.edge_off.push(out.edge_src.len());
-        // `Timeline._base`
-        let mut value = if kind == TIL { low } else { 0.0 };
-        for &(i, w) in &incoming {
-            if out.times[i] + w > value {
-                value = out.times[i] + w;
-            }
-        }
-        out.times.push(value);
-        let mut waits = Vec::new();
-        if let Some((ends, _)) = future {
-            for &(start, end_code) in ends {
-                let bound = out.highs[start];
-                if bound == f64::INFINITY {
-                    continue;
-                }
-                let after: Vec<usize> = interfering(snaps, &out.codes, end_code)
-                    .into_iter()
-                    .filter(|&k| k != start)
-                    .collect();
-                if !after.is_empty() {
-                    waits.push(Wait {
-                        start,
-                        high: bound,
-                        after,
-                    });
-                }
-            }
-        }
-        let touched = out.settle(n, &waits, eps)?;
-        if let Some((_, deadlines)) = future {
-            for &(when, snap) in deadlines {
-                let late = interfering(snaps, &out.codes, snap)
-                    .into_iter()
-                    .any(|k| out.times[k] + eps > when + TOL);
-                if late {
-                    return None;
-                }
-            }
-        }
-        // Python's max(..., default=0.0) over the times of the steps that are not TILs:
-        // times only grow (and are not negative), so the old span and the times that
-        // changed (`touched` on) give it.
-        let mut span = self.span;
-        for k in touched..out.times.len() {
-            if out.kinds[k] != TIL && out.times[k] > span {
-                span = out.times[k];
-            }
-        }
-        out.span = span;
-        Some(out)
-    }
-
-    /// `stn._settle`: propagate earliest times from step `first` on; None on a positive
-    /// cycle, else the first step whose time may have changed.
-    ///
-    /// The schedule was consistent before (every bound held), and times only grow: a
-    /// step's own bound (a timed literal's time, an action's longest duration, checked
-    /// at its end) can break only where its time changed, so only those are checked
-    /// (the Python reference checks them all, and finds the same).
-    fn settle(&mut self, mut first: usize, waits: &[Wait], eps: f64) -> Option<usize> {
-        let n = self.kinds.len();
-        let mut touched = first;
-        for _ in 0..n + 1 {
-            touched = touched.min(first);
-            for k in first..n {
-                let mut value = self.times[k];
-                for e in self.edge_off[k]..self.edge_off[k + 1] {
-                    let (i, w) = (self.edge_src[e], self.edge_w[e]);
-                    if self.times[i] + w > value {
-                        value = self.times[i] + w;
-                    }
-                }
-                self.times[k] = value;
-            }
-            let mut lowest = n;
-            for k in touched..n {
-                if self.kinds[k] == TIL {
-                    if self.times[k] > self.highs[k] + TOL {
-                        return None;
-                    }
-                } else if self.kinds[k] == END {
-                    let p = self.partners[k] as usize;
-                    if self.times[k] - self.times[p] > self.highs[k] + TOL {
-                        self.times[p] = self.times[k] - self.highs[k];
-                        lowest = lowest.min(p);
-                    }
-                }
-            }
-            for wait in waits {
-                // Python's max() over the steps' times, then + eps.
-                let mut latest = self.times[wait.after[0]];
-                for &k in &wait.after[1..] {
-                    if self.times[k] > latest {
-                        latest = self.times[k];
-                    }
-                }
-                let latest = latest + eps;
-                if latest - self.times[wait.start] > wait.high + TOL {
-                    self.times[wait.start] = latest - wait.high;
-                    lowest = lowest.min(wait.start);
-                }
-            }
-            if lowest == n {
-                return Some(touched);
-            }
-            first = lowest;
-        }
-        None
-    }
 }
 
 /// The order in which CPython's `set` iterates `keys` added one by one (the compiled

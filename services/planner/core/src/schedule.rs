@@ -1,0 +1,325 @@
+//! The simple temporal network of a partial plan (`cbdi_planner.stn.Timeline`'s
+//! numbers), exactly the Python reference's: which earlier steps a new one must follow,
+//! and the earliest consistent times.
+//!
+//! A search keeps every node's network, each its parent's with one step more. What a
+//! step is (its kind, partner, bound, snap code and incoming edges) never changes once
+//! appended, so it lives in chunks of `CHUNK` steps that the networks share (a full
+//! chunk is never written again; the last one is copied when a child appends to it);
+//! only the times, which propagation may change anywhere, are each network's own.
+
+use crate::{interferes, Interference, Touches};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use std::sync::Arc;
+
+pub const END: u8 = 1;
+pub const TIL: u8 = 3;
+const TOL: f64 = 1e-9;
+const CHUNK: usize = 32;
+
+/// Up to `CHUNK` consecutive steps; the edges of its step j are
+/// `edge_off[j]..edge_off[j + 1]`.
+#[derive(Clone)]
+struct Chunk {
+    kinds: Vec<u8>,
+    partners: Vec<i64>,
+    highs: Vec<f64>,
+    codes: Vec<usize>,
+    edge_off: Vec<usize>,
+    edge_src: Vec<usize>,
+    edge_w: Vec<f64>,
+}
+
+impl Chunk {
+    fn new() -> Self {
+        Chunk {
+            kinds: Vec::with_capacity(CHUNK),
+            partners: Vec::with_capacity(CHUNK),
+            highs: Vec::with_capacity(CHUNK),
+            codes: Vec::with_capacity(CHUNK),
+            edge_off: vec![0],
+            edge_src: Vec::new(),
+            edge_w: Vec::new(),
+        }
+    }
+
+    fn edges(&self, j: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        (self.edge_off[j]..self.edge_off[j + 1]).map(|e| (self.edge_src[e], self.edge_w[e]))
+    }
+}
+
+#[pyclass(frozen, module = "cbdi_planner_core")]
+#[derive(Clone, Default)]
+pub struct Schedule {
+    chunks: Vec<Arc<Chunk>>,
+    times: Vec<f64>,
+    #[pyo3(get)]
+    span: f64,
+}
+
+/// The happenings certain to come after a step: `(start step, end snap code)` of each
+/// running action, `(time, snap code)` of each timed literal still to happen.
+type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
+
+/// A running action's future end: its start step, its bound, the steps it must follow.
+struct Wait {
+    start: usize,
+    high: f64,
+    after: Vec<usize>,
+}
+
+#[pymethods]
+impl Schedule {
+    #[new]
+    fn new() -> Self {
+        Schedule::default()
+    }
+
+    /// The earliest time of each step.
+    #[getter]
+    fn times(&self) -> Vec<f64> {
+        self.times.clone()
+    }
+
+    /// Each step's incoming edges `(earlier step, least distance)`.
+    #[getter]
+    fn edges(&self) -> Vec<Vec<(usize, f64)>> {
+        (0..self.len())
+            .map(|k| self.edges_of(k).collect())
+            .collect()
+    }
+
+    /// `Timeline.extend`: the schedule with a step appended (its kind, partner, bounds
+    /// and snap code), or None if inconsistent. `future` (None: not checked) holds the
+    /// happenings certain to come: `(start step, end snap code)` of each running action,
+    /// `(time, snap code)` of each timed literal still to happen.
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (oracle, kind, partner, low, high, code, future, epsilon))]
+    fn extend(
+        &self,
+        py: Python<'_>,
+        oracle: &Interference,
+        kind: u8,
+        partner: i64,
+        low: f64,
+        high: f64,
+        code: usize,
+        future: Option<Coming>,
+        epsilon: f64,
+    ) -> PyResult<Option<Schedule>> {
+        let n = self.len();
+        let known = oracle.snaps.read().expect("interference lock").len();
+        let ends_ok = future.as_ref().is_none_or(|(ends, deadlines)| {
+            ends.iter().all(|&(s, c)| s <= n && c < known)
+                && deadlines.iter().all(|&(_, c)| c < known)
+        });
+        let partner_ok = kind != END || (partner >= 0 && (partner as usize) < n);
+        if code >= known || !ends_ok || !partner_ok {
+            return Err(PyValueError::new_err(
+                "a step or happening is unknown to the schedule",
+            ));
+        }
+        Ok(py.detach(|| {
+            let snaps = oracle.snaps.read().expect("interference lock");
+            self.extended(
+                &snaps,
+                kind,
+                partner,
+                low,
+                high,
+                code,
+                future.as_ref(),
+                epsilon,
+            )
+        }))
+    }
+}
+
+impl Schedule {
+    fn len(&self) -> usize {
+        self.times.len()
+    }
+
+    fn chunk(&self, k: usize) -> (&Chunk, usize) {
+        (&self.chunks[k / CHUNK], k % CHUNK)
+    }
+
+    fn kind(&self, k: usize) -> u8 {
+        let (c, j) = self.chunk(k);
+        c.kinds[j]
+    }
+
+    fn edges_of(&self, k: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let (c, j) = self.chunk(k);
+        c.edges(j)
+    }
+
+    /// The steps (positions) that interfere with happening `with` (`stn._interfering`).
+    fn interfering(&self, snaps: &[Touches], with: usize) -> Vec<usize> {
+        let b = &snaps[with];
+        let mut out = Vec::new();
+        for (i, chunk) in self.chunks.iter().enumerate() {
+            for (j, &code) in chunk.codes.iter().enumerate() {
+                if interferes(&snaps[code], b) {
+                    out.push(i * CHUNK + j);
+                }
+            }
+        }
+        out
+    }
+
+    /// Append a step (its time not yet set).
+    fn push(&mut self, kind: u8, partner: i64, high: f64, code: usize, incoming: &[(usize, f64)]) {
+        if self.len().is_multiple_of(CHUNK) {
+            self.chunks.push(Arc::new(Chunk::new()));
+        }
+        let chunk = Arc::make_mut(self.chunks.last_mut().expect("a chunk"));
+        chunk.kinds.push(kind);
+        chunk.partners.push(partner);
+        chunk.highs.push(high);
+        chunk.codes.push(code);
+        for &(i, w) in incoming {
+            chunk.edge_src.push(i);
+            chunk.edge_w.push(w);
+        }
+        chunk.edge_off.push(chunk.edge_src.len());
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn extended(
+        &self,
+        snaps: &[Touches],
+        kind: u8,
+        partner: i64,
+        low: f64,
+        high: f64,
+        code: usize,
+        future: Option<&Coming>,
+        eps: f64,
+    ) -> Option<Schedule> {
+        let n = self.len();
+        let mut incoming: Vec<(usize, f64)> = self
+            .interfering(snaps, code)
+            .into_iter()
+            .map(|i| (i, eps))
+            .collect();
+        if kind == END {
+            incoming.push((partner as usize, low));
+        }
+        let mut out = self.clone();
+        out.push(kind, partner, high, code, &incoming);
+        // `Timeline._base`
+        let mut value = if kind == TIL { low } else { 0.0 };
+        for &(i, w) in &incoming {
+            if out.times[i] + w > value {
+                value = out.times[i] + w;
+            }
+        }
+        out.times.push(value);
+        let mut waits = Vec::new();
+        if let Some((ends, _)) = future {
+            for &(start, end_code) in ends {
+                let (c, j) = out.chunk(start);
+                let bound = c.highs[j];
+                if bound == f64::INFINITY {
+                    continue;
+                }
+                let after: Vec<usize> = out
+                    .interfering(snaps, end_code)
+                    .into_iter()
+                    .filter(|&k| k != start)
+                    .collect();
+                if !after.is_empty() {
+                    waits.push(Wait {
+                        start,
+                        high: bound,
+                        after,
+                    });
+                }
+            }
+        }
+        let touched = out.settle(n, &waits, eps)?;
+        if let Some((_, deadlines)) = future {
+            for &(when, snap) in deadlines {
+                let late = out
+                    .interfering(snaps, snap)
+                    .into_iter()
+                    .any(|k| out.times[k] + eps > when + TOL);
+                if late {
+                    return None;
+                }
+            }
+        }
+        // Python's max(..., default=0.0) over the times of the steps that are not TILs:
+        // times only grow (and are not negative), so the old span and the times that
+        // changed (`touched` on) give it.
+        let mut span = self.span;
+        for k in touched..out.len() {
+            if out.kind(k) != TIL && out.times[k] > span {
+                span = out.times[k];
+            }
+        }
+        out.span = span;
+        Some(out)
+    }
+
+    /// `stn._settle`: propagate earliest times from step `first` on; None on a positive
+    /// cycle, else the first step whose time may have changed.
+    ///
+    /// The schedule was consistent before (every bound held), and times only grow: a
+    /// step's own bound (a timed literal's time, an action's longest duration, checked
+    /// at its end) can break only where its time changed, so only those are checked
+    /// (the Python reference checks them all, and finds the same).
+    fn settle(&mut self, mut first: usize, waits: &[Wait], eps: f64) -> Option<usize> {
+        let n = self.len();
+        let mut touched = first;
+        for _ in 0..n + 1 {
+            touched = touched.min(first);
+            for k in first..n {
+                let (c, j) = (&self.chunks[k / CHUNK], k % CHUNK);
+                let mut value = self.times[k];
+                for (i, w) in c.edges(j) {
+                    if self.times[i] + w > value {
+                        value = self.times[i] + w;
+                    }
+                }
+                self.times[k] = value;
+            }
+            let mut lowest = n;
+            for k in touched..n {
+                let (c, j) = (&self.chunks[k / CHUNK], k % CHUNK);
+                if c.kinds[j] == TIL {
+                    if self.times[k] > c.highs[j] + TOL {
+                        return None;
+                    }
+                } else if c.kinds[j] == END {
+                    let p = c.partners[j] as usize;
+                    if self.times[k] - self.times[p] > c.highs[j] + TOL {
+                        self.times[p] = self.times[k] - c.highs[j];
+                        lowest = lowest.min(p);
+                    }
+                }
+            }
+            for wait in waits {
+                // Python's max() over the steps' times, then + eps.
+                let mut latest = self.times[wait.after[0]];
+                for &k in &wait.after[1..] {
+                    if self.times[k] > latest {
+                        latest = self.times[k];
+                    }
+                }
+                let latest = latest + eps;
+                if latest - self.times[wait.start] > wait.high + TOL {
+                    self.times[wait.start] = latest - wait.high;
+                    lowest = lowest.min(wait.start);
+                }
+            }
+            if lowest == n {
+                return Some(touched);
+            }
+            first = lowest;
+        }
+        None
+    }
+}
