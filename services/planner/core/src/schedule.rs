@@ -26,6 +26,9 @@ struct Chunk {
     partners: Vec<i64>,
     highs: Vec<f64>,
     codes: Vec<usize>,
+    /// Each step's `Touches::folds` (the first six), here beside its code: a scan for
+    /// interfering steps reads these and looks a step's happening up only on a hit.
+    folds: Vec<[u64; 6]>,
     edge_off: Vec<usize>,
     edge_src: Vec<usize>,
     edge_w: Vec<f64>,
@@ -38,6 +41,7 @@ impl Chunk {
             partners: Vec::with_capacity(CHUNK),
             highs: Vec::with_capacity(CHUNK),
             codes: Vec::with_capacity(CHUNK),
+            folds: Vec::with_capacity(CHUNK),
             edge_off: vec![0],
             edge_src: Vec::new(),
             edge_w: Vec::new(),
@@ -158,10 +162,17 @@ impl Schedule {
     /// The steps (positions) that interfere with happening `with` (`stn._interfering`).
     fn interfering(&self, snaps: &[Touches], with: usize) -> Vec<usize> {
         let b = &snaps[with];
+        let g = &b.folds;
         let mut out = Vec::new();
         for (i, chunk) in self.chunks.iter().enumerate() {
-            for (j, &code) in chunk.codes.iter().enumerate() {
-                if interferes(&snaps[code], b) {
+            for (j, f) in chunk.folds.iter().enumerate() {
+                let maybe = (f[1] & g[0])
+                    | (f[0] & g[1])
+                    | (f[2] & g[3])
+                    | (f[3] & g[2])
+                    | (f[5] & g[6])
+                    | (f[4] & g[5]);
+                if maybe != 0 && interferes(&snaps[chunk.codes[j]], b) {
                     out.push(i * CHUNK + j);
                 }
             }
@@ -170,7 +181,15 @@ impl Schedule {
     }
 
     /// Append a step (its time not yet set).
-    fn push(&mut self, kind: u8, partner: i64, high: f64, code: usize, incoming: &[(usize, f64)]) {
+    fn push(
+        &mut self,
+        snap: &Touches,
+        kind: u8,
+        partner: i64,
+        high: f64,
+        code: usize,
+        incoming: &[(usize, f64)],
+    ) {
         if self.len().is_multiple_of(CHUNK) {
             self.chunks.push(Arc::new(Chunk::new()));
         }
@@ -179,6 +198,8 @@ impl Schedule {
         chunk.partners.push(partner);
         chunk.highs.push(high);
         chunk.codes.push(code);
+        let f = &snap.folds;
+        chunk.folds.push([f[0], f[1], f[2], f[3], f[4], f[5]]);
         for &(i, w) in incoming {
             chunk.edge_src.push(i);
             chunk.edge_w.push(w);
@@ -208,7 +229,7 @@ impl Schedule {
             incoming.push((partner as usize, low));
         }
         let mut out = self.clone();
-        out.push(kind, partner, high, code, &incoming);
+        out.push(&snaps[code], kind, partner, high, code, &incoming);
         // `Timeline._base`
         let mut value = if kind == TIL { low } else { 0.0 };
         for &(i, w) in &incoming {
