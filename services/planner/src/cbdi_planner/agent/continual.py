@@ -138,8 +138,8 @@ class ContinualPlanner:
         self.repair_trigger = ""
         self.ids = count(1)
         self.published: set[str] = set()  # every plan id sent, for the statuses' sake
-        # A request's problem `warm` read ahead: (its text, its beliefs and goal).
-        self._read: tuple[str, tuple[BeliefSet, list[list[str]]]] | None = None
+        # A request's problem `warm` read ahead: (the request, its beliefs and goal).
+        self._read: tuple[SearchRequest, tuple[BeliefSet, list[list[str]]]] | None = None
 
     @property
     def search(self) -> Search | None:
@@ -178,7 +178,7 @@ class ContinualPlanner:
                 read = self._read_problem(req)
             except (GoalError, PlannerError):
                 return
-            self._read = (req.problem, read)
+            self._read = (req, read)
             beliefs, goal = read
         else:
             goal = self.goal_of(req) if req is not None else None
@@ -251,7 +251,7 @@ class ContinualPlanner:
         if not req.problem or req.kind == "cancel":
             return req
         read, self._read = self._read, None
-        beliefs, goal = read[1] if read and read[0] == req.problem else self._read_problem(req)
+        beliefs, goal = read[1] if read and read[0] is req else self._read_problem(req)
         self.beliefs = beliefs
         self.transients.see(beliefs)
         return replace(req, goal=goal, problem="")
