@@ -1,6 +1,7 @@
 //! FF's relaxed plan, extracted backwards from an explored graph
 //! (`RelaxedPlanGraph._extract`), with the same sets in the same order.
 
+use crate::graph::{Csr, Layers};
 use crate::pyset::PySet;
 
 /// Op kinds (`cbdi_planner.stn`).
@@ -12,9 +13,9 @@ pub const TIL: u8 = 3;
 pub struct Ops<'a> {
     pub kind: &'a [u8],
     pub action: &'a [usize],
-    pub pre: &'a [Vec<usize>],
-    pub add: &'a [Vec<usize>],
-    pub adders: &'a [Vec<usize>],
+    pub pre: &'a Csr,
+    pub add: &'a Csr,
+    pub adders: &'a Csr,
     /// The start op of each action (-1: none).
     pub start_op: &'a [i64],
     pub duration: &'a [f64],
@@ -24,23 +25,37 @@ pub struct Ops<'a> {
 /// sum of its actions' durations.
 pub type Relaxed = (usize, Vec<(u8, usize)>, f64);
 
+/// Which ops an extraction took and which facts it has achieved, kept between calls.
+#[derive(Default)]
+pub struct Marks {
+    taken: Vec<bool>,
+    done: Vec<bool>,
+}
+
 /// Extract the relaxed plan of `goals` from the layers of an exploration.
 pub fn extract(
     ops: &Ops<'_>,
     goals: &[usize],
-    level: &[i64],
-    achiever: &[i64],
-    op_level: &[i64],
+    layers: &Layers,
     til: usize,
+    marks: &mut Marks,
 ) -> Relaxed {
+    let Layers {
+        level,
+        achiever,
+        op_level,
+    } = layers;
     let top = goals.iter().map(|&g| level[g]).max().unwrap_or(0).max(0) as usize;
     let mut buckets: Vec<PySet> = (0..=top).map(|_| PySet::new()).collect();
     for &g in goals {
         buckets[level[g] as usize].add(g);
     }
     let mut chosen = PySet::new();
-    let mut taken = vec![false; ops.kind.len()];
-    let mut done = vec![false; level.len()];
+    let Marks { taken, done } = marks;
+    taken.clear();
+    taken.resize(ops.kind.len(), false);
+    done.clear();
+    done.resize(level.len(), false);
     let mut sought: Vec<usize> = Vec::new();
     for depth in (1..=top).rev() {
         let bucket: Vec<usize> = buckets[depth].iter().collect();
@@ -57,10 +72,11 @@ pub fn extract(
             }
             taken[k] = true;
             chosen.add(k);
-            for &f in &ops.add[k] {
-                done[f] = true;
+            for &f in ops.add.get(k) {
+                done[f as usize] = true;
             }
-            for &p in &ops.pre[k] {
+            for &p in ops.pre.get(k) {
+                let p = p as usize;
                 if level[p] > 0 && !done[p] {
                     buckets[level[p] as usize].add(p);
                 }
@@ -70,7 +86,8 @@ pub fn extract(
     let mut helpful: Vec<(u8, usize)> = Vec::new();
     if top >= 1 {
         for g in buckets[1].iter() {
-            for &k in &ops.adders[g] {
+            for &k in ops.adders.get(g) {
+                let k = k as usize;
                 if op_level[k] == 0 && (ops.kind[k] != TIL || ops.action[k] == til) {
                     helpful.push((ops.kind[k], ops.action[k]));
                 }
@@ -78,7 +95,8 @@ pub fn extract(
         }
     }
     for g in sought {
-        for &k in &ops.adders[g] {
+        for &k in ops.adders.get(g) {
+            let k = k as usize;
             if ops.kind[k] == END {
                 let start = ops.start_op[ops.action[k]];
                 if start >= 0 && op_level[start as usize] == 0 {

@@ -1,0 +1,535 @@
+//! The temporal relaxed planning graph of a state (`RelaxedPlanGraph._explore`) and a
+//! state's whole heuristic estimate in one call (`RelaxedPlanGraph.estimate`).
+//!
+//! The graph's lists live in flat arrays (`Csr`) of 32-bit indices, and every
+//! exploration works in buffers its thread keeps from one call to the next (`Scratch`),
+//! so that exploring allocates nothing once a thread has warmed up: on a big map the
+//! exploration touches most of the graph, and pointer chasing and allocation were most
+//! of its cost.
+
+use crate::extract::{extract, Marks, Ops, Relaxed};
+use crate::numeric::{assign_of, cond_of, may_hold, widen, Assign, Cond};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use std::cell::RefCell;
+use std::collections::HashMap;
+
+/// One list of indices per key, all in one array (compressed sparse rows).
+pub(crate) struct Csr {
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Csr {
+    fn new(lists: &[Vec<usize>]) -> PyResult<Self> {
+        let too_big = || PyValueError::new_err("relaxed planning graph too large");
+        let mut offsets = Vec::with_capacity(lists.len() + 1);
+        let mut items = Vec::new();
+        offsets.push(0);
+        for list in lists {
+            for &x in list {
+                items.push(u32::try_from(x).map_err(|_| too_big())?);
+            }
+            offsets.push(u32::try_from(items.len()).map_err(|_| too_big())?);
+        }
+        Ok(Csr { offsets, items })
+    }
+
+    /// The list of key `i`.
+    #[inline]
+    pub(crate) fn get(&self, i: usize) -> &[u32] {
+        &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    }
+
+    fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    fn all_below(&self, bound: usize) -> bool {
+        self.items.iter().all(|&x| (x as usize) < bound)
+    }
+}
+
+/// The layers of one exploration (-1: never): each fact's first layer and achiever op,
+/// each op's first layer.
+#[derive(Default)]
+pub(crate) struct Layers {
+    pub level: Vec<i32>,
+    pub achiever: Vec<i32>,
+    pub op_level: Vec<i32>,
+}
+
+/// What an exploration works in, kept per thread between calls.
+#[derive(Default)]
+struct Scratch {
+    layers: Layers,
+    counts: Vec<i32>,
+    frontier: Vec<u32>,
+    ready: Vec<u32>,
+    waiting: Vec<u32>,
+    due: Vec<u32>,
+    held: Vec<u32>,
+    acting: Vec<u32>,
+    missing: Vec<u32>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    marks: Marks,
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// A relaxed planning graph's operators, flattened as `RelaxedPlanGraph._index` does.
+#[pyclass(frozen, module = "cbdi_planner_core")]
+pub(crate) struct Graph {
+    size: usize,
+    pending: usize,
+    /// The ops counting each fact among their conditions.
+    users: Csr,
+    counts: Vec<i32>,
+    /// What firing op k does (`RelaxedPlanGraph._fire`): numeric or not, the end op it
+    /// enables by itself (-1: none), the facts it adds that some op counts (`live`) and
+    /// the others (`quiet`).
+    numeric: Vec<bool>,
+    then: Vec<i32>,
+    live: Csr,
+    quiet: Csr,
+    num_pre: Vec<Vec<Cond>>,
+    num_eff: Vec<Vec<Assign>>,
+    free: Vec<u32>,
+    til_ops: Vec<u32>,
+    op_pre: Csr,
+    chained_end: HashMap<usize, usize>,
+    op_kind: Vec<u8>,
+    op_action: Vec<usize>,
+    op_add: Csr,
+    adders: Csr,
+    start_op: Vec<i64>,
+    op_duration: Vec<f64>,
+    /// How many numeric variables the ops read or write (a state has at least these).
+    vars: usize,
+}
+
+fn indices(list: Vec<usize>) -> PyResult<Vec<u32>> {
+    list.into_iter()
+        .map(|x| u32::try_from(x).map_err(|_| PyValueError::new_err("op index too large")))
+        .collect()
+}
+
+#[pymethods]
+impl Graph {
+    /// Build from a `RelaxedPlanGraph` once it has indexed its operators.
+    #[new]
+    fn new(rpg: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let size: usize = rpg.getattr("size")?.extract()?;
+        let pending: usize = rpg.getattr("pending")?.extract()?;
+        let users: Vec<Vec<usize>> = rpg.getattr("users")?.extract()?;
+        let counts: Vec<i64> = rpg.getattr("counts")?.extract()?;
+        let op_pre: Vec<Vec<usize>> = rpg.getattr("op_pre")?.extract()?;
+        let op_add: Vec<Vec<usize>> = rpg.getattr("op_add")?.extract()?;
+        let op_kind: Vec<u8> = rpg.getattr("op_kind")?.extract()?;
+        let op_action: Vec<usize> = rpg.getattr("op_action")?.extract()?;
+        let starts: HashMap<usize, usize> = rpg.getattr("start_op")?.extract()?;
+        let actions = op_action.iter().map(|&a| a + 1).max().unwrap_or(0);
+        let mut start_op = vec![-1i64; actions];
+        for (a, k) in starts {
+            if a >= actions {
+                return Err(PyValueError::new_err(format!(
+                    "start of unknown action {a}"
+                )));
+            }
+            start_op[a] = k as i64;
+        }
+        let fires: Vec<(bool, i64, Vec<usize>, Vec<usize>)> = rpg.getattr("_fire")?.extract()?;
+        let ops = fires.len();
+        let mut numeric = Vec::with_capacity(ops);
+        let mut then = Vec::with_capacity(ops);
+        let (mut live, mut quiet) = (Vec::with_capacity(ops), Vec::with_capacity(ops));
+        for (is_numeric, next, l, q) in fires {
+            numeric.push(is_numeric);
+            then.push(i32::try_from(next).map_err(|_| PyValueError::new_err("bad op"))?);
+            live.push(l);
+            quiet.push(q);
+        }
+        let mut num_pre = Vec::new();
+        for conds in rpg.getattr("op_num_pre")?.try_iter()? {
+            num_pre.push(
+                conds?
+                    .try_iter()?
+                    .map(|c| cond_of(&c?))
+                    .collect::<PyResult<Vec<_>>>()?,
+            );
+        }
+        let mut num_eff = Vec::new();
+        for effects in rpg.getattr("op_num_eff")?.try_iter()? {
+            num_eff.push(
+                effects?
+                    .try_iter()?
+                    .map(|e| assign_of(&e?))
+                    .collect::<PyResult<Vec<_>>>()?,
+            );
+        }
+        let counts = counts
+            .into_iter()
+            .map(|c| i32::try_from(c).map_err(|_| PyValueError::new_err("bad op count")))
+            .collect::<PyResult<Vec<_>>>()?;
+        let adders: Vec<Vec<usize>> = rpg.getattr("adders")?.extract()?;
+        let graph = Graph {
+            size,
+            pending,
+            users: Csr::new(&users)?,
+            counts,
+            numeric,
+            then,
+            live: Csr::new(&live)?,
+            quiet: Csr::new(&quiet)?,
+            num_pre,
+            num_eff,
+            free: indices(rpg.getattr("free")?.extract()?)?,
+            til_ops: indices(rpg.getattr("til_ops")?.extract()?)?,
+            op_pre: Csr::new(&op_pre)?,
+            chained_end: rpg.getattr("chained_end")?.extract()?,
+            op_kind,
+            op_action,
+            op_add: Csr::new(&op_add)?,
+            adders: Csr::new(&adders)?,
+            start_op,
+            op_duration: rpg.getattr("op_duration")?.extract()?,
+            vars: 0,
+        };
+        let vars = graph.num_pre.iter().flatten().map(Cond::vars);
+        let vars = vars
+            .chain(graph.num_eff.iter().flatten().map(Assign::vars))
+            .max();
+        let graph = Graph {
+            vars: vars.unwrap_or(0),
+            ..graph
+        };
+        graph.check()?;
+        Ok(graph)
+    }
+
+    /// `RelaxedPlanGraph._explore` of the state (`facts` as little-endian bytes of its
+    /// bitmask, its running actions, timed-literal groups past and numeric values):
+    /// `(level, achiever, op_level)`, or None when a goal is never reached.
+    #[allow(clippy::type_complexity)]
+    fn explore(
+        &self,
+        py: Python<'_>,
+        facts: &[u8],
+        open: Vec<usize>,
+        til: usize,
+        nums: Vec<f64>,
+        goals: Vec<usize>,
+    ) -> PyResult<Option<(Vec<i64>, Vec<i64>, Vec<i64>)>> {
+        self.check_state(facts, &open, &goals, &nums)?;
+        let facts = facts.to_vec();
+        Ok(py.detach(move || {
+            SCRATCH.with(|cell| {
+                let s = &mut *cell.borrow_mut();
+                if !self.run(s, &facts, &open, til, &nums, &goals) {
+                    return None;
+                }
+                let wide = |v: &[i32]| v.iter().map(|&x| x as i64).collect::<Vec<_>>();
+                let layers = &s.layers;
+                Some((
+                    wide(&layers.level),
+                    wide(&layers.achiever),
+                    wide(&layers.op_level),
+                ))
+            })
+        }))
+    }
+
+    /// `RelaxedPlanGraph.estimate` of a state (as `explore` takes it) without the cache:
+    /// `(length, helpful, duration)` of its relaxed plan (helpful happenings as sorted
+    /// `(kind, action)` pairs), or None when a goal is never reached.
+    fn estimate(
+        &self,
+        py: Python<'_>,
+        facts: &[u8],
+        open: Vec<usize>,
+        til: usize,
+        nums: Vec<f64>,
+        goals: Vec<usize>,
+    ) -> PyResult<Option<Relaxed>> {
+        self.check_state(facts, &open, &goals, &nums)?;
+        let facts = facts.to_vec();
+        Ok(py.detach(move || {
+            SCRATCH.with(|cell| {
+                let s = &mut *cell.borrow_mut();
+                if !self.run(s, &facts, &open, til, &nums, &goals) {
+                    return None;
+                }
+                let ops = Ops {
+                    kind: &self.op_kind,
+                    action: &self.op_action,
+                    pre: &self.op_pre,
+                    add: &self.op_add,
+                    adders: &self.adders,
+                    start_op: &self.start_op,
+                    duration: &self.op_duration,
+                };
+                Some(extract(&ops, &goals, &s.layers, til, &mut s.marks))
+            })
+        }))
+    }
+}
+
+impl Graph {
+    /// Refuse a state or goals outside the graph.
+    fn check_state(
+        &self,
+        facts: &[u8],
+        open: &[usize],
+        goals: &[usize],
+        nums: &[f64],
+    ) -> PyResult<()> {
+        if let Some(bad) = goals.iter().find(|&&g| g >= self.size) {
+            return Err(PyValueError::new_err(format!(
+                "goal {bad} is outside the graph"
+            )));
+        }
+        if let Some(bad) = open.iter().find(|&&a| self.pending + a >= self.size) {
+            return Err(PyValueError::new_err(format!(
+                "running action {bad} is unknown"
+            )));
+        }
+        let outside = facts
+            .iter()
+            .enumerate()
+            .skip(self.size / 8)
+            .any(|(i, &byte)| (0..8).any(|j| byte & (1 << j) != 0 && i * 8 + j >= self.size));
+        if outside {
+            return Err(PyValueError::new_err("a fact is outside the graph"));
+        }
+        if nums.len() < self.vars {
+            return Err(PyValueError::new_err("a numeric variable has no value"));
+        }
+        Ok(())
+    }
+
+    fn check(&self) -> PyResult<()> {
+        let ops = self.numeric.len();
+        let fact_ok = |f: &usize| *f < self.size;
+        let ok = self.users.len() == self.size
+            && self.users.all_below(ops)
+            && self.counts.len() == ops
+            && self.then.len() == ops
+            && self.then.iter().all(|&k| k < ops as i32)
+            && self.live.len() == ops
+            && self.live.all_below(self.size)
+            && self.quiet.len() == ops
+            && self.quiet.all_below(self.size)
+            && self.num_pre.len() == ops
+            && self.num_eff.len() == ops
+            && self.op_pre.len() == ops
+            && self.op_pre.all_below(self.size)
+            && self.free.iter().all(|&k| (k as usize) < ops)
+            && self.til_ops.iter().all(|&k| (k as usize) < ops)
+            && self.chained_end.values().all(|&k| k < ops)
+            && self
+                .chained_end
+                .keys()
+                .all(|&a| fact_ok(&(self.pending + a)))
+            && self.op_kind.len() == ops
+            && self.op_action.len() == ops
+            && self.op_add.len() == ops
+            && self.op_add.all_below(self.size)
+            && self.op_duration.len() == ops
+            && self.adders.len() == self.size
+            && self.adders.all_below(ops)
+            && self.start_op.iter().all(|&k| k < ops as i64);
+        if ok {
+            Ok(())
+        } else {
+            Err(PyValueError::new_err("inconsistent relaxed planning graph"))
+        }
+    }
+
+    /// Explore layer by layer until every goal is reached (false: one never is), into
+    /// `s.layers`.
+    fn run(
+        &self,
+        s: &mut Scratch,
+        facts: &[u8],
+        open: &[usize],
+        til: usize,
+        nums: &[f64],
+        goals: &[usize],
+    ) -> bool {
+        let Scratch {
+            layers,
+            counts,
+            frontier,
+            ready,
+            waiting,
+            due,
+            held,
+            acting,
+            missing,
+            lo,
+            hi,
+            ..
+        } = s;
+        let Layers {
+            level,
+            achiever,
+            op_level,
+        } = layers;
+        reset(level, self.size);
+        reset(achiever, self.size);
+        reset(op_level, self.numeric.len());
+        counts.clear();
+        counts.extend_from_slice(&self.counts);
+        frontier.clear();
+        for (i, &byte) in facts.iter().enumerate() {
+            let mut bits = byte;
+            while bits != 0 {
+                frontier.push((i * 8) as u32 + bits.trailing_zeros());
+                bits &= bits - 1;
+            }
+        }
+        frontier.extend(open.iter().map(|a| (self.pending + a) as u32));
+        for &f in frontier.iter() {
+            level[f as usize] = 0;
+        }
+        missing.clear();
+        missing.extend(goals.iter().filter(|&&g| level[g] < 0).map(|&g| g as u32));
+        lo.clear();
+        lo.extend_from_slice(nums);
+        hi.clear();
+        hi.extend_from_slice(nums);
+        ready.clear();
+        ready.extend_from_slice(&self.free);
+        if til < self.til_ops.len() {
+            ready.extend_from_slice(&self.til_ops[til..]);
+        }
+        let extra = self.running_ends(open, level, counts, ready);
+        let everything = !extra.is_empty();
+        waiting.clear();
+        let mut depth = 0i32;
+        while !missing.is_empty() {
+            for &f in frontier.iter() {
+                for &k in self.users.get(f as usize) {
+                    let count = &mut counts[k as usize];
+                    *count -= 1;
+                    if *count == 0 {
+                        ready.push(k);
+                    }
+                }
+                if everything {
+                    if let Some(ks) = extra.get(&f) {
+                        for &k in ks {
+                            let count = &mut counts[k as usize];
+                            *count -= 1;
+                            if *count == 0 {
+                                ready.push(k);
+                            }
+                        }
+                    }
+                }
+            }
+            held.clear();
+            acting.clear();
+            due.clear();
+            due.append(waiting);
+            due.append(ready);
+            frontier.clear();
+            let mut fired = false;
+            let next_level = depth + 1;
+            for &k in due.iter() {
+                let k = k as usize;
+                if op_level[k] >= 0 {
+                    continue;
+                }
+                if self.numeric[k] {
+                    let pre = &self.num_pre[k];
+                    if !pre.is_empty() && !pre.iter().all(|c| may_hold(c, lo, hi)) {
+                        held.push(k as u32);
+                        continue;
+                    }
+                    if !self.num_eff[k].is_empty() {
+                        acting.push(k as u32);
+                    }
+                }
+                op_level[k] = depth;
+                fired = true;
+                let then = self.then[k];
+                if then >= 0 {
+                    ready.push(then as u32);
+                }
+                let (live, quiet): (&[u32], &[u32]) = if everything {
+                    (self.op_add.get(k), &[])
+                } else {
+                    (self.live.get(k), self.quiet.get(k))
+                };
+                for &f in live {
+                    let f = f as usize;
+                    if level[f] < 0 {
+                        level[f] = next_level;
+                        achiever[f] = k as i32;
+                        frontier.push(f as u32);
+                    }
+                }
+                for &f in quiet {
+                    let f = f as usize;
+                    if level[f] < 0 {
+                        level[f] = next_level;
+                        achiever[f] = k as i32;
+                    }
+                }
+            }
+            if !fired {
+                return false;
+            }
+            for &k in acting.iter() {
+                for effect in &self.num_eff[k as usize] {
+                    widen(effect, lo, hi);
+                }
+            }
+            std::mem::swap(waiting, held);
+            depth = next_level;
+            missing.retain(|&g| level[g as usize] < 0);
+        }
+        true
+    }
+
+    /// `RelaxedPlanGraph._running_ends`: the counters of running actions' chained ends.
+    fn running_ends(
+        &self,
+        open: &[usize],
+        level: &[i32],
+        counts: &mut [i32],
+        ready: &mut Vec<u32>,
+    ) -> HashMap<u32, Vec<u32>> {
+        let mut extra: HashMap<u32, Vec<u32>> = HashMap::new();
+        for a in open {
+            let Some(&k) = self.chained_end.get(a) else {
+                continue;
+            };
+            let need: Vec<u32> = self
+                .op_pre
+                .get(k)
+                .iter()
+                .copied()
+                .filter(|&f| level[f as usize] < 0)
+                .collect();
+            counts[k] = need.len() as i32;
+            if need.is_empty() {
+                ready.push(k as u32);
+            }
+            for f in need {
+                extra.entry(f).or_default().push(k as u32);
+            }
+        }
+        extra
+    }
+}
+
+/// `values` as `size` times -1, in the memory it has.
+fn reset(values: &mut Vec<i32>, size: usize) {
+    values.clear();
+    values.resize(size, -1);
+}
