@@ -124,6 +124,29 @@ def test_continual_rounds_are_the_same(monkeypatch: pytest.MonkeyPatch) -> None:
     assert runs[0] == runs[1] and any(e[0] == "plan" for e in runs[0])
 
 
+# Durations that sum to another float in another order (0.1 + 0.3 + 0.7 ...): the
+# compiled core must then sum a relaxed plan's in CPython's set order.
+HOPS_DOMAIN = """(define (domain hops) (:requirements :durative-actions :typing)
+ (:types place)
+ (:predicates (at ?p - place) (link ?a ?b - place) (seen ?p - place))
+ (:durative-action hop :parameters (?a ?b - place) :duration (= ?duration 0.1)
+  :condition (and (at start (at ?a)) (over all (link ?a ?b)))
+  :effect (and (at start (not (at ?a))) (at end (at ?b)) (at end (seen ?b))))
+ (:durative-action leap :parameters (?a ?b - place) :duration (= ?duration 0.7)
+  :condition (and (at start (at ?a)) (at start (link ?b ?a)))
+  :effect (and (at start (not (at ?a))) (at end (at ?b)) (at end (seen ?b)))))"""
+HOPS_PROBLEM = """(define (problem ring) (:domain hops)
+ (:objects p0 p1 p2 p3 p4 p5 p6 p7 - place)
+ (:init (at p0) (link p0 p1) (link p1 p2) (link p2 p3) (link p3 p4) (link p4 p5)
+  (link p5 p6) (link p6 p7) (link p7 p0) (link p2 p6))
+ (:goal (and (seen p3) (seen p5) (seen p7) (seen p6))))"""
+
+
+def hops() -> Task:
+    domain = parse_domain(HOPS_DOMAIN)
+    return ground(domain, parse_problem(HOPS_PROBLEM, domain))
+
+
 def walk(task: Task, seed: int, length: int) -> list[object]:
     """States on a random walk from the initial state (starts, ends, timed literals)."""
     rng = random.Random(seed)
@@ -141,9 +164,14 @@ def walk(task: Task, seed: int, length: int) -> list[object]:
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 10_000), problem=st.sampled_from(["paper-7x7", "zenotravel"]))
+@given(
+    seed=st.integers(0, 10_000), problem=st.sampled_from(["paper-7x7", "zenotravel", "hops"])
+)
 def test_heuristic_values_are_the_same_on_random_states(seed: int, problem: str) -> None:
-    task = recycling(problem) if problem == "paper-7x7" else ipc("zenotravel", "p02")
+    if problem == "hops":
+        task = hops()
+    else:
+        task = recycling(problem) if problem == "paper-7x7" else ipc("zenotravel", "p02")
     graphs = [RelaxedPlanGraph(task, core=c) for c in ("python", "compiled")]
     for state in walk(task, seed, 12):
         python, rust = (g.estimate(state) for g in graphs)  # type: ignore[arg-type]
@@ -189,6 +217,50 @@ def test_sets_iterate_in_cpythons_order(keys: list[int]) -> None:
     for key in keys:
         expected.add(key)
     assert core.set_order(keys) == list(expected)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=st.lists(
+        st.one_of(
+            st.integers(-(1 << 20), 1 << 20).map(lambda v: v / 4),
+            st.floats(-1e6, 1e6, allow_nan=False),
+            st.sampled_from([0.1, 1e300, -1e300, math.inf, 2.0**-70]),
+        ),
+        max_size=40,
+    ),
+    seed=st.integers(0, 1000),
+)
+def test_sums_called_exact_are_the_same_in_any_order(values: list[float], seed: int) -> None:
+    """A relaxed plan whose ops' durations sum exactly sums them in visit order, not in
+    CPython's set order: that must give the same float, whatever the order."""
+    core = compiled("compiled")
+    assert core is not None
+
+    def total(items: list[float]) -> float:
+        out = 0.0
+        for v in items:
+            out += v
+        return out
+
+    if core.sums_exactly(values):
+        shuffled = values[:]
+        random.Random(seed).shuffle(shuffled)
+        assert total(shuffled) == total(values) == math.fsum(values)
+
+
+def test_both_ways_of_summing_durations_are_checked() -> None:
+    """paper-7x7's durations sum exactly, hops' (tenths) do not: the random-state test
+    above runs the compiled core's two ways against Python's."""
+    core = compiled("compiled")
+    assert core is not None
+    assert core.sums_exactly([0.5, 1.0, 2.25, 7.0]) and not core.sums_exactly([0.1, 0.2])
+    assert not core.sums_exactly([1e300, 1.0]) and not core.sums_exactly([math.inf])
+    paper = RelaxedPlanGraph(recycling("paper-7x7"), core="compiled")
+    tenths = RelaxedPlanGraph(hops(), core="compiled")
+    assert paper._core.exact and not tenths._core.exact  # type: ignore[union-attr]
+    sums = {tenths.estimate(state).duration for state in walk(hops(), 3, 12)}
+    assert len(sums) > 1 and any(s * 10 != round(s * 10) for s in sums)
 
 
 def _snap(bits: list[int]) -> Snap:

@@ -19,6 +19,29 @@ pub struct Ops<'a> {
     /// The start op of each action (-1: none).
     pub start_op: &'a [i64],
     pub duration: &'a [f64],
+    /// Whether the durations sum to the same in any order (`sums_exactly`): then the
+    /// chosen ops need no set that iterates in CPython's order.
+    pub exact: bool,
+}
+
+/// Whether floats `values` sum exactly, so to the same in any order: all multiples of
+/// one power of two 2^-k (k <= 64) whose sum of magnitudes is below 2^(53-k).
+pub fn sums_exactly(values: &[f64]) -> bool {
+    let mut k = 0i32;
+    let mut total = 0.0f64;
+    for &v in values {
+        if !v.is_finite() {
+            return false;
+        }
+        while (v * 2f64.powi(k)).fract() != 0.0 {
+            k += 1;
+            if k > 64 {
+                return false;
+            }
+        }
+        total += v.abs();
+    }
+    total * 2f64.powi(k) < 2f64.powi(52)
 }
 
 /// A relaxed plan's length, its helpful happenings `(kind, action)`, sorted, and the
@@ -30,6 +53,9 @@ pub type Relaxed = (usize, Vec<(u8, usize)>, f64);
 pub struct Marks {
     taken: Vec<bool>,
     done: Vec<bool>,
+    buckets: Vec<PySet>,
+    chosen: PySet,
+    sought: Vec<usize>,
 }
 
 /// Extract the relaxed plan of `goals` from the layers of an exploration.
@@ -46,20 +72,35 @@ pub fn extract(
         op_level,
     } = layers;
     let top = goals.iter().map(|&g| level[g]).max().unwrap_or(0).max(0) as usize;
-    let mut buckets: Vec<PySet> = (0..=top).map(|_| PySet::new()).collect();
+    let Marks {
+        taken,
+        done,
+        buckets,
+        chosen,
+        sought,
+    } = marks;
+    if buckets.len() <= top {
+        buckets.resize_with(top + 1, PySet::new);
+    }
+    for bucket in &mut buckets[..=top] {
+        bucket.clear();
+    }
     for &g in goals {
         buckets[level[g] as usize].add(g);
     }
-    let mut chosen = PySet::new();
-    let Marks { taken, done } = marks;
+    chosen.clear();
     taken.clear();
     taken.resize(ops.kind.len(), false);
     done.clear();
     done.resize(level.len(), false);
-    let mut sought: Vec<usize> = Vec::new();
+    sought.clear();
+    let (mut count, mut duration) = (0usize, 0.0f64);
     for depth in (1..=top).rev() {
-        let bucket: Vec<usize> = buckets[depth].iter().collect();
-        for g in bucket {
+        // An achiever's conditions lie in lower layers: the bucket in hand stays as it
+        // is (the Python core would add a condition of a layer above to a bucket it has
+        // passed, to no effect).
+        let (lower, upper) = buckets.split_at_mut(depth);
+        for g in upper[0].iter() {
             if done[g] {
                 continue;
             }
@@ -71,14 +112,19 @@ pub fn extract(
                 continue;
             }
             taken[k] = true;
-            chosen.add(k);
+            if ops.exact {
+                count += 1;
+                duration += ops.duration[k];
+            } else {
+                chosen.add(k);
+            }
             for &f in ops.add.get(k) {
                 done[f as usize] = true;
             }
             for &p in ops.pre.get(k) {
                 let p = p as usize;
-                if level[p] > 0 && !done[p] {
-                    buckets[level[p] as usize].add(p);
+                if level[p] > 0 && !done[p] && (level[p] as usize) < depth {
+                    lower[level[p] as usize].add(p);
                 }
             }
         }
@@ -94,7 +140,7 @@ pub fn extract(
             }
         }
     }
-    for g in sought {
+    for &g in sought.iter() {
         for &k in ops.adders.get(g) {
             let k = k as usize;
             if ops.kind[k] == END {
@@ -107,9 +153,11 @@ pub fn extract(
     }
     helpful.sort_unstable();
     helpful.dedup();
-    let mut duration = 0.0;
-    for k in chosen.iter() {
-        duration += ops.duration[k];
+    if !ops.exact {
+        for k in chosen.iter() {
+            duration += ops.duration[k];
+        }
+        count = chosen.iter().count();
     }
-    (chosen.iter().count(), helpful, duration)
+    (count, helpful, duration)
 }

@@ -7,7 +7,7 @@
 //! exploration touches most of the graph, and pointer chasing and allocation were most
 //! of its cost.
 
-use crate::extract::{extract, Marks, Ops, Relaxed};
+use crate::extract::{extract, sums_exactly, Marks, Ops, Relaxed};
 use crate::numeric::{assign_of, cond_of, may_hold, widen, Assign, Cond};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -107,6 +107,8 @@ pub(crate) struct Graph {
     adders: Csr,
     start_op: Vec<i64>,
     op_duration: Vec<f64>,
+    /// Whether the ops' durations sum exactly (`extract::sums_exactly`).
+    exact: bool,
     /// How many numeric variables the ops read or write (a state has at least these).
     vars: usize,
 }
@@ -197,6 +199,7 @@ impl Graph {
             start_op,
             op_duration: rpg.getattr("op_duration")?.extract()?,
             vars: 0,
+            exact: false,
         };
         let vars = graph.num_pre.iter().flatten().map(Cond::vars);
         let vars = vars
@@ -204,10 +207,17 @@ impl Graph {
             .max();
         let graph = Graph {
             vars: vars.unwrap_or(0),
+            exact: sums_exactly(&graph.op_duration),
             ..graph
         };
         graph.check()?;
         Ok(graph)
+    }
+
+    /// Whether the ops' durations sum to the same in any order (`sums_exactly`).
+    #[getter]
+    fn exact(&self) -> bool {
+        self.exact
     }
 
     /// `RelaxedPlanGraph._explore` of the state (`facts` as little-endian bytes of its
@@ -270,6 +280,7 @@ impl Graph {
                     adders: &self.adders,
                     start_op: &self.start_op,
                     duration: &self.op_duration,
+                    exact: self.exact,
                 };
                 Some(extract(&ops, &goals, &s.layers, til, &mut s.marks))
             })

@@ -173,9 +173,16 @@ fn set_order(keys: Vec<usize>) -> Vec<usize> {
     set.iter().collect()
 }
 
+/// Whether floats sum to the same in any order (`extract::sums_exactly`).
+#[pyfunction]
+fn sums_exactly(values: Vec<f64>) -> bool {
+    extract::sums_exactly(&values)
+}
+
 #[pymodule]
 fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(set_order, m)?)?;
+    m.add_function(wrap_pyfunction!(sums_exactly, m)?)?;
     m.add_class::<Graph>()?;
     m.add_class::<Interference>()?;
     m.add_class::<Schedule>()?;

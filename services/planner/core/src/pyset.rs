@@ -19,6 +19,12 @@ pub struct PySet {
     used: usize,
 }
 
+impl Default for PySet {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl PySet {
     pub fn new() -> Self {
         PySet {
@@ -26,6 +32,14 @@ impl PySet {
             mask: 7,
             used: 0,
         }
+    }
+
+    /// `set.clear()`, keeping the memory.
+    pub fn clear(&mut self) {
+        self.table.clear();
+        self.table.resize(8, EMPTY);
+        self.mask = 7;
+        self.used = 0;
     }
 
     /// Put `key` in `table` unless it is there; whether it was put.
