@@ -11,7 +11,7 @@ PYTEST_ARGS ?=
 PYTEST_WORKERS ?= 2
 PYTEST_PARALLEL = -n $(PYTEST_WORKERS) --dist loadfile
 
-.PHONY: venv demo test test-fast lint bench bench-planner bench-continual bench-table1 clean system-tools image
+.PHONY: venv demo test test-fast lint bench bench-planner bench-continual bench-table1 bench-fleet clean system-tools image
 
 venv: $(STAMP)
 
@@ -96,6 +96,14 @@ bench-continual: venv
 BENCH_TABLE1_ARGS ?=
 bench-table1: venv
 	$(BIN)/python benchmarks/table1.py $(BENCH_TABLE1_ARGS)
+
+# Fleets of 1 to 16 BDI robots on warehouse-15x15 and campus-30x30, 5 seeds each, lockstep,
+# against a lower bound from the map; writes fleet.csv, fleet.md and fleet.png to
+# benchmarks/results/. Options, e.g. BENCH_FLEET_ARGS="--maps warehouse-15x15-bdi
+# --agents 1 2 4 --seeds 3 --jobs 2" or BENCH_FLEET_ARGS="--reuse benchmarks/results/fleet.csv".
+BENCH_FLEET_ARGS ?=
+bench-fleet: venv
+	$(BIN)/python benchmarks/fleet.py $(BENCH_FLEET_ARGS)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
