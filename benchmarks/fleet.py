@@ -2,7 +2,8 @@
 
 For each map (`--maps`: recycling BDI scenarios) and fleet size N (`--agents`; a size
 beyond the map's start cells is skipped and said so), `--seeds` lockstep runs of
-`cbdi up SCENARIO --agents N --seed S --speed 0 --until done --json --record R`, `--jobs`
+`cbdi up SCENARIO --agents N --seed S --speed 0 --until done --json --record R` with the
+seed varying the people (`VARY`: their start on their loop and their pace), `--jobs`
 at a time. Per run:
 
 - mission time (simulated s to the last item recycled) and whether it ended `done`;
@@ -45,6 +46,7 @@ from fleet_report import draw, markdown
 from table1_model import summary_of
 from table1_runner import GRACE, PortPool, Progress, execute, stop_all
 
+from cbdi import keys
 from cbdi.wire.agent import Claim
 from cbdi.wire.base import WireError, decode
 from cbdi_monitor.reader import read_messages
@@ -55,6 +57,9 @@ CBDI = str(Path(sys.executable).parent / "cbdi")
 SCENARIOS = ROOT / "domains/recycling/scenarios"
 MAPS = ("warehouse-15x15-bdi", "campus-30x30-bdi")
 SIZES = (1, 2, 4, 8, 16)
+# What the seed varies by default: where on its loop each person starts, and a step of
+# jitter in their pace (the maps' worlds are otherwise the same for every seed).
+VARY = ("--option", "people_phase=true", "--option", "people_jitter=1")
 
 
 @dataclass
@@ -84,37 +89,58 @@ class FleetRun:
 
 
 def claim_changes(recording: Path) -> int:
-    """How often an item's owner became another robot, over the recorded claims."""
+    """How often an item's owner became another robot, over the recorded claims.
+
+    The owners are compared from epoch to epoch (at each clock tick and at the end), not
+    after every claim: the claims of one epoch reach the recorder in any order, and what
+    the owners were between two of them is no decision any robot acted on.
+    """
     observers: dict[str, Claims] = {}
     owners: dict[str, str] = {}
     changes = 0
+
+    def compare() -> None:
+        nonlocal changes
+        for group, view in sorted(observers.items()):
+            for item, owner in sorted(view.assignment().items()):
+                before = owners.get(f"{group}/{item}")
+                if before is not None and before != owner:
+                    changes += 1
+                owners[f"{group}/{item}"] = owner
+
     for m in read_messages(recording):
+        if m.key == keys.CLOCK:
+            compare()
+            continue
         if not m.key.endswith("/scheduler/claims"):
             continue
         try:
             claim = decode(m.payload, Claim, m.key)
         except WireError:
             continue
-        group = observers.setdefault(
+        view = observers.setdefault(
             claim.group, Claims(agent="#observer", group=claim.group, predicates=frozenset())
         )
-        group.on_claim(claim)
-        for item, owner in group.assignment().items():
-            before = owners.get(f"{claim.group}/{item}")
-            if before is not None and before != owner:
-                changes += 1
-            owners[f"{claim.group}/{item}"] = owner
+        view.on_claim(claim)
+    compare()
     return changes
 
 
-def run_one(scenario: str, agents: int, seed: int, ports: PortPool, limit: float) -> FleetRun:
+def run_one(
+    scenario: str,
+    agents: int,
+    seed: int,
+    ports: PortPool,
+    limit: float,
+    up_args: Sequence[str] = VARY,
+) -> FleetRun:
     """Run one lockstep `cbdi up` and read its summary and recording."""
     with tempfile.TemporaryDirectory(prefix="cbdi-fleet-") as tmp, ports.lease() as port:
         recording = Path(tmp) / "run.mcap"
         argv = [
             CBDI, "up", scenario, "--agents", str(agents), "--seed", str(seed),
             "--speed", "0", "--until", "done", "--json", "--quiet", "--port", str(port),
-            "--timeout", str(limit), "--record", str(recording),
+            "--timeout", str(limit), "--record", str(recording), *up_args,
         ]  # fmt: skip
         code, out, err, wall = execute(argv, limit + GRACE)
         summary = summary_of(out)
@@ -210,6 +236,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--timeout", type=float, default=1800.0, help="wall seconds per run")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks/results")
     p.add_argument("--reuse", type=Path, help="render this CSV of runs, run nothing")
+    p.add_argument(
+        "--up-arg",
+        action="append",
+        dest="up_args",
+        help="passed to every `cbdi up` instead of the default seeded variation "
+        f"({' '.join(VARY)}); repeat it, `--up-arg=--flag` for a flag alone",
+    )
     args = p.parse_args(argv)
     for name in args.maps:
         if not (SCENARIOS / f"{name}.toml").is_file():
@@ -247,7 +280,8 @@ def run_all(
     runs: list[FleetRun] = []
     pool = ThreadPoolExecutor(max_workers=args.jobs)
     try:
-        futures = [pool.submit(run_one, *t, ports, args.timeout) for t in tasks]
+        vary = tuple(args.up_args) if args.up_args is not None else VARY
+        futures = [pool.submit(run_one, *t, ports, args.timeout, vary) for t in tasks]
         for future in as_completed(futures):
             run = future.result()
             runs.append(run)

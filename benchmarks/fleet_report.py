@@ -41,15 +41,19 @@ def markdown(
     out = [
         "# Fleet benchmark",
         "",
-        "Lockstep runs (`cbdi up SCENARIO --agents N --seed S --speed 0 --until done`), "
-        "seeds 1..n. Mission time in simulated seconds: mean ± standard deviation "
+        "Lockstep runs (`cbdi up SCENARIO --agents N --seed S --speed 0 --until done`, "
+        "by default with `--option people_phase=true --option people_jitter=1`: the seed "
+        "sets where each person starts on its loop and jitters their pace), seeds 1..n. "
+        "Mission time in simulated seconds: mean ± standard deviation "
         "[95% bootstrap interval of the mean], over runs that ended `done`. "
         "*bound*: the lower bound below (its deciding term); *x bound*: mean mission time "
         "over the bound; *speed-up*: the mean mission time of 1 robot over this one's. "
         "*busy*: each robot's simulated seconds in actions over the mission time, the "
         "least and the mean over robots and runs. *searches/action*: plans published "
         "(fresh, repair, revised goal, improvement) per action asked of the world. "
-        "*claim changes/item*: times an item's owner became another robot, per item.",
+        "*claim changes/item*: times an item's owner (as every robot's scheduler assigns "
+        "it from the group's claims) became another robot from one epoch to the next, "
+        "per item.",
         "",
     ]
     for name in maps:

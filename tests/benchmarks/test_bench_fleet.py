@@ -13,8 +13,10 @@ from types import ModuleType
 import pytest
 from cbdi_recycling.maps import parse_map
 
+from cbdi import keys
 from cbdi.wire.agent import Claim
 from cbdi.wire.base import encode
+from cbdi.wire.world import Tick
 from cbdi_monitor.recorder import McapRecorder
 from pngcheck import read_png
 
@@ -67,22 +69,33 @@ def _claim(agent: str, item: str, epoch: int, cost: float, released: bool = Fals
     return Claim(agent=agent, group="team", item=item, epoch=epoch, cost=cost, released=released)
 
 
-def test_claim_changes_count_owners_that_change(tmp_path: Path) -> None:
+def test_claim_changes_count_owners_that_change_from_epoch_to_epoch(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     recorder = McapRecorder(path)
-    claims = [
-        _claim("robot1", "p1", 0, 5.0),  # p1: robot1
-        _claim("robot2", "p1", 1, 2.0),  # cheaper, within the window: robot2 (1 change)
-        _claim("robot1", "p2", 2, 1.0),  # p2: robot1
-        _claim("robot2", "p1", 0, 0.0, released=True),  # p1 back to robot1 (2)
-        _claim("robot1", "p1", 0, 0.0, released=True),  # p1 nobody
-        _claim("robot2", "p1", 9, 3.0),  # p1 robot2 after nobody: a change (3)
+    epochs = [
+        # robot1 then robot2 (cheaper, within the window) claim p1 in one epoch: robot2
+        # owns it at the tick; robot1 owning it in between is no change.
+        [_claim("robot1", "p1", 0, 5.0), _claim("robot2", "p1", 0, 2.0)],
+        [_claim("robot1", "p2", 1, 1.0)],  # p2: robot1
+        [_claim("robot2", "p1", 0, 0.0, released=True)],  # p1 back to robot1: 1
+        # robot1 gives p1 up and robot2 claims it again: robot2 (2)
+        [_claim("robot1", "p1", 0, 0.0, released=True), _claim("robot2", "p1", 9, 3.0)],
     ]
-    for i, c in enumerate(claims):
-        recorder.write(f"cbdi/{c.agent}/scheduler/claims", encode(c), log_ns=1000 + i)
-        recorder.write("cbdi/robot1/scheduler/other", encode(c), log_ns=1000 + i)  # ignored
+    log = 1000
+    for epoch, claims in enumerate(epochs):
+        recorder.write(
+            keys.CLOCK,
+            encode(
+                Tick(epoch=epoch, time=float(epoch), epoch_duration=1.0, speed=0.0, lockstep=True)
+            ),
+            log_ns=log,
+        )
+        for c in claims:
+            log += 1
+            recorder.write(f"cbdi/{c.agent}/scheduler/claims", encode(c), log_ns=log)
+            recorder.write("cbdi/robot1/scheduler/other", encode(c), log_ns=log)  # ignored
     recorder.finish_file()
-    assert fleet.claim_changes(path) == 3
+    assert fleet.claim_changes(path) == 2
 
 
 def test_a_summary_gives_the_figures() -> None:
