@@ -6,15 +6,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from cbdi_courier.floor import load_floor
 from cbdi_courier.simulator import CourierSimulator
 from test_bad_input import alone
 
 from cbdi import keys
 from cbdi.bus import request
 from cbdi.clock import ManualClock
-from cbdi.errors import RequestFailedError
+from cbdi.errors import ConfigError, RequestFailedError
 from cbdi.runtime.together import TogetherService
-from cbdi.simulator import SimulatorConfig
+from cbdi.simulator import EpochResult, SimulatorConfig
 from cbdi.wire.world import ActionReply, ActionRequest, Sensed, WorldInfo, WorldInfoRequest
 from cbdi_world.service import WorldSettings, build_world, world_main
 from tests_support import REPO
@@ -83,6 +84,66 @@ def test_an_unknown_action_is_refused_naming_the_courier_actions(tmp_path: Path)
     req = ActionRequest(agent="robot1", action="move", request_id="m", args=["robot1", "c_1_4"])
     reply = s.request(req)
     assert not reply.accepted and "drive" in reply.reason and "charge" in reply.reason
+
+
+ROUNDS = REPO / "domains/courier/maps/rounds-10x4.toml"
+
+
+def act(s: CourierSimulator, name: str, *args: str) -> None:
+    req = ActionRequest(agent="robot1", action=name, request_id=name, args=["robot1", *args])
+    assert s.request(req).accepted
+
+
+def of(agent: str, result: EpochResult) -> Sensed:
+    return next(p for p in result.percepts if isinstance(p, Sensed) and p.agent == agent)
+
+
+def test_a_parcel_of_two_rounds_comes_back_and_every_robot_is_told(tmp_path: Path) -> None:
+    text = ROUNDS.read_text(encoding="utf-8").replace("to = [7, 2]", "to = [1, 2]")
+    path = tmp_path / "rounds.toml"
+    path.write_text(text, encoding="utf-8")
+    s = CourierSimulator(SimulatorConfig(map=str(path), agents=("robot1", "robot2"), seed=1))
+    far = of("robot2", s.step())
+    assert ["parcel_at", "p1", "c_2_1"] in far.add  # an order, out of robot2's sight
+    act(s, "drive", "c_1_1", "c_2_1")
+    s.step(), s.step()
+    act(s, "grab", "p1", "c_2_1")
+    s.step()
+    act(s, "drive", "c_2_1", "c_1_1")
+    s.step(), s.step()
+    act(s, "drive", "c_1_1", "c_1_2")
+    s.step(), s.step()
+    act(s, "drop", "p1", "c_1_2")
+    result = s.step()
+    assert s.delivered == ["p1"] and "p1" not in s.parcels and not s.done
+    seen = of("robot2", result)
+    assert ["delivered", "p1"] in seen.add
+    for _ in range(3):  # again_after = 3 s: back at its start, undelivered
+        result = s.step()
+    assert s.parcels["p1"] == (2, 1)
+    seen = of("robot2", result)
+    assert ["delivered", "p1"] in seen.delete and ["parcel_at", "p1", "c_2_1"] in seen.add
+    assert s.stats().totals == {"parcels": 2, "deliveries": 4, "delivered": 1}
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("rounds = 2\nagain_after = 3.0\n\n[[parcels]]", "rounds = 1.5\n\n[[parcels]]", "rounds"),
+        ("rounds = 2\nagain_after = 3.0\n\n[[parcels]]", "rounds = 0\n\n[[parcels]]", "rounds"),
+        ("again_after = 3.0\n\n[[parcels]]", "again_after = -1\n\n[[parcels]]", "again_after"),
+        ("again_after = 3.0\n\n[[parcels]]", 'again_after = "soon"\n\n[[parcels]]', "again_after"),
+    ],
+)
+def test_a_bad_round_is_refused_naming_the_parcel(
+    tmp_path: Path, old: str, new: str, field: str
+) -> None:
+    text = ROUNDS.read_text(encoding="utf-8")
+    assert old in text
+    path = tmp_path / "rounds.toml"
+    path.write_text(text.replace(old, new), encoding="utf-8")
+    with pytest.raises(ConfigError, match=rf"parcels\[0\]\.{field}"):
+        load_floor(path)
 
 
 async def test_the_world_service_hosts_the_courier_simulator() -> None:

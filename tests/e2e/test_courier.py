@@ -73,3 +73,26 @@ def test_courier_robots_deliver_every_parcel(tmp_path: Path) -> None:
     )
     assert inspect.returncode == 0, inspect.stderr
     assert "result: done" in inspect.stdout
+
+
+def test_work_that_comes_back_goes_to_the_robot_nearer_then(tmp_path: Path) -> None:
+    """courier-rounds: two parcels cross the floor in opposite directions, each twice.
+    Each robot starts beside one and takes it; once both are delivered each robot stands
+    near the other's start. A claim ends when its goal is achieved, so when the parcels
+    come back the robots claim them afresh and the nearer one takes each: every robot
+    delivers both parcels once (with claims that outlived their goal, each robot walked
+    back for its first parcel)."""
+    rec = tmp_path / "rounds.mcap"
+    args = ["courier-rounds", "--lockstep", "--json", "--quiet", "--port", str(free_port())]
+    done = cbdi_up(*args, "--record", str(rec), timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(done.stdout)
+    assert report["result"] == "done", report["reason"]
+    assert report["stats"]["delivered"] == report["stats"]["deliveries"] == 4
+    achieved: dict[str, list[str]] = {}
+    for m in read_messages(rec):
+        if m.key.endswith("/scheduler/desires"):
+            e = decode(m.payload, DesireEvent)
+            if e.desire == "deliver" and e.event == "achieved":
+                achieved.setdefault(e.agent, []).extend(g[1] for g in e.goal)
+    assert achieved == {"robot1": ["p1", "p2"], "robot2": ["p2", "p1"]}, achieved

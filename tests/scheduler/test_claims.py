@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import msgspec
+import pytest
 from cbdi_recycling.events import UNKNOWN_DISTANCE, distance
 
 from cbdi.beliefs import BeliefSet, fact
@@ -196,3 +197,59 @@ def test_distances_on_the_30x30_campus_are_shortest_paths_and_fast() -> None:
     assert abs(x1 - x0) + abs(y1 - y0) <= first < UNKNOWN_DISTANCE
     assert again == [first] * 100 and first == distance(beliefs, "r", "p")
     print(f"30x30: first query and 100 more in {took * 1000:.1f} ms")  # a figure, no bound
+
+
+def test_an_achieved_goal_ends_every_claim_on_its_item_and_the_group_believes_it() -> None:
+    a = Claims("robot1", "couriers", frozenset({"delivered"}))
+    b = Claims("robot2", "couriers", frozenset({"delivered"}))
+    sent = a.claim([("delivered", "p1")], 0, lambda item: 1.0)
+    sent += b.claim([("delivered", "p1")], 0, lambda item: 6.0)
+    for claim in sent:
+        a.on_claim(claim)
+        b.on_claim(claim)
+    assert a.owner("p1") == b.owner("p1") == "robot1"
+    done = a.release([("delivered", "p1")], achieved=True)
+    assert [(c.item, c.released, c.achieved) for c in done] == [("p1", True, ["delivered", "p1"])]
+    assert b.on_claim(done[0])
+    # The contest is over at both: robot2's losing claim ends too, so the item, if it
+    # comes back, is claimed afresh by whoever wants it then.
+    assert a.owner("p1") is None and b.owner("p1") is None and b.mine() == []
+    again = a.claim([("delivered", "p1")], 30, lambda item: 6.0)
+    again += b.claim([("delivered", "p1")], 30, lambda item: 1.0)
+    for claim in again:
+        a.on_claim(claim)
+        b.on_claim(claim)
+    assert a.owner("p1") == b.owner("p1") == "robot2"  # nearer when the work came back
+
+
+def test_a_release_says_achieved_only_for_a_goal_atom_on_its_item() -> None:
+    with pytest.raises(ValueError, match="only a release"):
+        Claim(agent="robot1", group="g", item="p1", achieved=["delivered", "p1"])
+    with pytest.raises(ValueError, match="not a goal atom"):
+        Claim(agent="robot1", group="g", item="p1", released=True, achieved=["delivered", "p2"])
+    with pytest.raises(msgspec.ValidationError):
+        msgspec.convert(
+            {"agent": "robot1", "group": "g", "item": "p1", "released": True, "achieved": [""]},
+            Claim,
+        )
+    a = Claims("robot1", "g", frozenset({"delivered"}))
+    other = Claim(agent="robot2", group="g", item="p1", released=True, achieved=["seen", "p1"])
+    assert not a.on_claim(other)  # not a goal the group shares out: ignored
+
+
+def test_a_robot_releases_a_goal_it_achieved_and_others_believe_it() -> None:
+    r1 = Mind(load_agent(AGENT, "robot1"))
+    r2 = Mind(load_agent(AGENT, "robot2"))
+    out1 = r1.on_percepts(seen("robot1", 0, ("p1", (1, 1))))
+    tell(out1, r2)
+    assert r1.claims is not None and r1.claims.owner("p1") == "robot1"
+    r1.beliefs = r1.beliefs.adding([fact("recycled", "p1")])  # its plan recycled p1
+    out = r1.on_percepts(seen("robot1", 1))
+    assert [(c.item, c.achieved) for c in out.claims] == [("p1", ["recycled", "p1"])]
+    assert ("recycle", "achieved") in [(e.desire, e.event) for e in out.events]
+    tell(out, r2)
+    assert r2.beliefs.holds(fact("recycled", "p1"))
+    # robot2 still sees p1 where it was: its rule does not take it up (achieved).
+    again = r2.on_percepts(seen("robot2", 2, ("p1", (1, 1))))
+    assert again.claims == [] and "recycle" not in r2.desires
+    assert [e for e in again.events if e.desire == "recycle"] == []  # not even added

@@ -15,6 +15,8 @@
     name = "p1"
     at = [6, 1]                # x (column), y (row)
     to = [1, 1]
+    rounds = 1                 # deliveries asked (default 1); more: the parcel comes back
+    again_after = 5.0          # seconds after a delivery it waits at `at` again (rounds > 1)
 
     [[carts]]                  # a dynamic obstacle: rolls along its route and back
     name = "cart1"
@@ -46,9 +48,14 @@ def cell_name(c: Cell) -> str:
 
 @dataclass(frozen=True)
 class Parcel:
+    """A parcel to carry from `at` to `to`, `rounds` times: after each delivery but the
+    last it waits at `at` again `again_after` seconds later (work that comes back)."""
+
     name: str
     at: Cell
     to: Cell
+    rounds: int = 1
+    again_after: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -82,12 +89,22 @@ class Floor:
         return [n for n in ((x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)) if self.floor_cell(n)]
 
 
-def _number(data: dict[str, Any], key: str, where: str, low: float, high: float) -> float:
-    value = data.get(key)
+def _number(
+    data: dict[str, Any],
+    key: str,
+    where: str,
+    low: float,
+    high: float,
+    default: float | None = None,
+    field: str = "",
+) -> float:
+    """Read number `key` of table `field` (top level: ""); absent: `default` if given."""
+    value = data.get(key, default)
+    name = f"{field}.{key}" if field else key
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(where, key, f"expected a number, got {value!r}")
+        raise ConfigError(where, name, f"expected a number, got {value!r}")
     if not (math.isfinite(value) and low <= value <= high):
-        raise ConfigError(where, key, f"expected a number in [{low:g}, {high:g}], got {value!r}")
+        raise ConfigError(where, name, f"expected a number in [{low:g}, {high:g}], got {value!r}")
     return float(value)
 
 
@@ -152,9 +169,13 @@ def load_floor(path: str | Path) -> Floor:
         name = raw.get("name")
         if not isinstance(name, str) or not name.isidentifier():
             raise ConfigError(where, f"{field}.name", f"expected a name, got {name!r}")
+        rounds = _number(raw, "rounds", where, 1, 1e6, default=1, field=field)
+        if rounds != int(rounds):
+            raise ConfigError(where, f"{field}.rounds", f"expected a whole number, got {rounds}")
+        again = _number(raw, "again_after", where, 0, 1e6, default=0.0, field=field)
         parcels.append(
             Parcel(name, _cell(raw.get("at"), where, f"{field}.at", ok),
-                   _cell(raw.get("to"), where, f"{field}.to", ok))
+                   _cell(raw.get("to"), where, f"{field}.to", ok), int(rounds), again)
         )  # fmt: skip
     if len({p.name for p in parcels}) != len(parcels):
         raise ConfigError(where, "parcels", "parcel names must be unique")
@@ -176,7 +197,7 @@ def load_floor(path: str | Path) -> Floor:
         for a, b in itertools.pairwise(cells):
             if abs(a[0] - b[0]) + abs(a[1] - b[1]) != 1:
                 raise ConfigError(where, f"{field}.route", f"{list(a)} to {list(b)} is no step")
-        step = int(_number(raw, "step", where, 1, 1e6))
+        step = int(_number(raw, "step", where, 1, 1e6, field=field))
         carts.append(Cart(name, cells, step))
     return Floor(
         name=str(data.get("name", Path(path).stem)),

@@ -3,8 +3,10 @@
 Pure and deterministic: the same floor, agents and seed give the same run. Each epoch,
 in this order: open doors nobody stands in may close (seeded, one stream for doors),
 which breaks a drive into that door (its `over all (open ?to)`); due actions end (in
-order of end time, then agent name); carts roll one cell along their route every `step`
-epochs (they wait for a cell a robot holds); every robot senses the square around it.
+order of end time, then agent name); parcels due back wait at their start again (a
+parcel of several `rounds`); carts roll one cell along their route every `step` epochs
+(they wait for a cell a robot holds); every robot senses the square around it, and is
+told where a parcel of several rounds waits.
 
 Actions follow `pddl/domain.pddl`: a robot does one at a time; `drive` takes its target
 cell at start and uses one unit of battery, `grab` and `drop` move a parcel, `charge`
@@ -110,7 +112,10 @@ class CourierSimulator:
         }
         self.parcels: dict[str, Cell] = {p.name: p.at for p in f.parcels}  # lying on the floor
         self.goal = {p.name: p.to for p in f.parcels}
-        self.delivered: list[str] = []
+        self.rounds = {p.name: p.rounds for p in f.parcels}
+        self.delivered: list[str] = []  # every delivery, in order (a parcel per round)
+        self.resting: set[str] = set()  # delivered, and not (yet) back
+        self.returns: dict[str, float] = {}  # parcel -> when it waits at its start again
         self.open = {d: True for d in sorted(f.doors)}
         self.carts = [_CartState(c.name, c.route, c.step) for c in f.carts]
         self.rejected: dict[str, int] = {}
@@ -118,7 +123,7 @@ class CourierSimulator:
     # -- the host's interface -------------------------------------------------------------
     @property
     def done(self) -> bool:
-        return len(self.delivered) == len(self.goal)
+        return len(self.delivered) == sum(self.rounds.values())
 
     def info(self) -> WorldInfo:
         f = self.floor
@@ -182,6 +187,7 @@ class CourierSimulator:
         self.time = self.epoch * self.floor.epoch_duration
         self._close_doors()
         outcomes = self._complete()
+        self._bring_back()
         self._roll_carts()
         return self._result(outcomes)
 
@@ -203,7 +209,11 @@ class CourierSimulator:
             time=self.time,
             agents=rows,
             done=self.done,
-            totals={"parcels": len(self.goal), "delivered": len(self.delivered)},
+            totals={
+                "parcels": len(self.goal),
+                "deliveries": sum(self.rounds.values()),
+                "delivered": len(self.delivered),
+            },
         )
 
     # -- actions --------------------------------------------------------------------------
@@ -317,10 +327,24 @@ class CourierSimulator:
         elif action.name == "grab":
             robot.carrying = action.args[1]
         elif action.name == "drop":
-            self.delivered.append(action.args[1])
+            parcel = action.args[1]
+            self.delivered.append(parcel)
+            self.resting.add(parcel)
+            if self.delivered.count(parcel) < self.rounds[parcel]:
+                again = next(p.again_after for p in self.floor.parcels if p.name == parcel)
+                self.returns[parcel] = self.time + again
         elif action.name == "charge":
             robot.battery = float(self.floor.battery)
             robot.charged = True
+
+    def _bring_back(self) -> None:
+        """Parcels whose time came wait at their start again, undelivered."""
+        start = {p.name: p.at for p in self.floor.parcels}
+        for parcel, when in sorted(self.returns.items()):
+            if when <= self.time + _EPS:
+                del self.returns[parcel]
+                self.resting.discard(parcel)
+                self.parcels[parcel] = start[parcel]
 
     def _roll_carts(self) -> None:
         for cart in self.carts:
@@ -354,7 +378,9 @@ class CourierSimulator:
         going = a.target if a and a.name == "drive" and a.target and not a.broken else None
         cell = going or robot.cell
         carrying = a.args[1] if a and a.name == "grab" else robot.carrying
-        delivered = [*self.delivered, *([a.args[1]] if a and a.name == "drop" else [])]
+        dropping = [a.args[1]] if a and a.name == "drop" else []
+        delivered = [p for p in dict.fromkeys([*self.delivered, *dropping]) if p in self.resting]
+        delivered += [p for p in dropping if p not in delivered]
         opening = a.target if a and a.name == "open_door" else None
         charging = a is not None and a.name == "charge"
         add: list[list[str]] = [["at", robot.name, cell_name(cell)]]
@@ -376,6 +402,16 @@ class CourierSimulator:
         for p in self.goal:
             (add if carrying == p else delete).append(["carrying", robot.name, p])
         add += [["delivered", p] for p in delivered]
+        # A parcel that comes back is an order: every robot is told where it waits (out
+        # of sight too), and that it is no longer delivered.
+        for p, rounds in self.rounds.items():
+            if rounds == 1:
+                continue
+            if p not in delivered:
+                delete.append(["delivered", p])
+            waits = self.parcels.get(p)
+            if waits is not None and max(abs(waits[0] - ax), abs(waits[1] - ay)) > d:
+                add.append(["parcel_at", p, cell_name(waits)])
         for pred, holds in (
             ("idle", True),
             ("empty", not carrying),

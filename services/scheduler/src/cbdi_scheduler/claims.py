@@ -74,24 +74,34 @@ class Claims:
             out.append(Claim(agent=self.agent, group=self.group, item=item, epoch=at, cost=c))
         return out
 
-    def release(self, atoms: Iterable[tuple[str, ...]]) -> list[Claim]:
-        """Give up this agent's claims on the items of `atoms`; return the messages."""
+    def release(self, atoms: Iterable[tuple[str, ...]], achieved: bool = False) -> list[Claim]:
+        """Give up this agent's claims on the items of `atoms` (`achieved`: because the
+        atoms hold now; the messages say so); return the messages."""
         out = []
         for atom in atoms:
             item = self.claimable(atom)
             if item is None or self.held.get(item, {}).pop(self.agent, None) is None:
                 continue
             self._owners = None
-            out.append(Claim(agent=self.agent, group=self.group, item=item, released=True))
+            if achieved:  # the contest is over: every claim on the item ends
+                self.held.pop(item, None)
+            done = list(atom) if achieved else []
+            out.append(
+                Claim(agent=self.agent, group=self.group, item=item, released=True, achieved=done)
+            )
         return out
 
     def on_claim(self, claim: Claim) -> bool:
         """Take in another agent's claim or release; return whether it counts here."""
         if claim.group != self.group or claim.agent == self.agent:
             return False
+        if claim.achieved and self.claimable(tuple(claim.achieved)) != claim.item:
+            return False  # not a goal this group shares out
         holders = self.held.setdefault(claim.item, {})
         self._owners = None
-        if claim.released:
+        if claim.achieved:  # the contest is over: every claim on the item ends, ours too
+            del self.held[claim.item]
+        elif claim.released:
             holders.pop(claim.agent, None)
         else:
             holders[claim.agent] = (claim.epoch, claim.cost)

@@ -167,7 +167,7 @@ class Mind:
         for name, d in desires.items():
             held = self.desires.get(name)
             old = set(held.goal) if held is not None else set()
-            goal = tuple(g for g in d.goal if g in old or self._ours(g.atom, holding))
+            goal = tuple(g for g in d.goal if g in old or self._takes(g, holding))
             if held is not None and set(goal) == old:
                 out[name] = held  # what a boost brought was all others': nothing new
             elif goal:
@@ -260,6 +260,15 @@ class Mind:
         assert self.claims is not None
         return self.claims.foreign(atom) is None or self.claims.claimable(atom) in holding
 
+    def _takes(self, goal: Belief, holding: set[str]) -> bool:
+        """Return whether a rule's new goal atom is ours to take up: its object is free
+        or ours, and a shared goal is not already achieved (by us or, as the group told,
+        by another agent)."""
+        assert self.claims is not None
+        if self.claims.claimable(goal.atom) is not None and self.beliefs.holds(goal):
+            return False
+        return self._ours(goal.atom, holding)
+
     def _holding(self) -> set[str]:
         return self.knowledge.holding(self.beliefs, self.agent)
 
@@ -270,6 +279,10 @@ class Mind:
         if self.claims is None or not self.claims.on_claim(claim):
             return out
         self.refire = self.refire or claim.released  # the rules may take the item up now
+        if claim.achieved:  # the claimer achieved the goal atom: the group believes it
+            before = self.beliefs
+            self.beliefs = self.beliefs.adding([fact(*claim.achieved)])
+            self.changed = self.changed or self.beliefs != before
         self._coordinate(out)
         self._deliberate(out)
         return out
@@ -282,8 +295,12 @@ class Mind:
         holding = self._holding()
         for name, desire in list(self.desires.items()):
             mine = [g for g in desire.goal if self._ours(g.atom, holding)]
+            # A claim ends when its goal atom is achieved: the item is free to be
+            # claimed anew if the atom becomes false again (work that comes back).
+            done = [g.atom for g in mine if self.beliefs.holds(g)]
+            out.claims += claims.release(done, achieved=True)
             out.claims += claims.claim(
-                (g.atom for g in mine),
+                (g.atom for g in mine if not self.beliefs.holds(g)),
                 self.epoch,
                 lambda item: self.knowledge.cost(self.beliefs, self.agent, item),
                 holding=holding,

@@ -292,8 +292,11 @@ class AgentState(Message, frozen=True, tag="cbdi.agent.AgentState/1"):
 class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     """An agent claims (or, `released`, gives up) a goal object within its group.
 
-    The earliest claim (`epoch`), then the cheapest (`cost`: the claimer's distance to
-    it), then the first agent name owns the object; the others leave it.
+    How claims decide is `cbdi_scheduler.claims` (docs/agents.md): claims made about the
+    same time compete by `cost` (the claimer's way to the object) and the load each
+    claimer already has; a later claim takes the object over only when it is clearly
+    cheaper than the owner's. `achieved`: a release because the claimer achieved the
+    goal atom (`["delivered", "p1"]`, its second symbol the item): the group believes it.
     """
 
     agent: AgentName
@@ -302,3 +305,10 @@ class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     epoch: Epoch = -1
     cost: Finite = 0.0
     released: bool = False
+    achieved: Annotated[list[Symbol], msgspec.Meta(max_length=32)] = []
+
+    def __post_init__(self) -> None:
+        if self.achieved and not self.released:
+            raise ValueError("only a release says a goal was achieved")
+        if self.achieved and (len(self.achieved) < 2 or self.achieved[1] != self.item):
+            raise ValueError(f"achieved {self.achieved} is not a goal atom on item {self.item}")
