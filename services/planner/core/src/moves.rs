@@ -271,7 +271,7 @@ impl Moves {
         }
         Ok(py.detach(|| {
             let snaps = self.oracle.get().snaps.read().expect("interference lock");
-            let mut out: Option<Schedule> = None;
+            let mut out = net.clone();
             for p in &placing.steps {
                 let coming: Coming = (
                     p.running
@@ -288,19 +288,21 @@ impl Moves {
                     END => self.actions[p.action].codes.1,
                     _ => self.actions[p.action].codes.0,
                 };
-                let from = out.as_ref().unwrap_or(net);
-                out = Some(from.extended(
+                let (kind, partner, low, high) = (p.kind, p.partner, p.low, p.high);
+                if !out.append(
                     &snaps,
-                    p.kind,
-                    p.partner,
-                    p.low,
-                    p.high,
+                    kind,
+                    partner,
+                    low,
+                    high,
                     code,
                     Some(&coming),
                     epsilon,
-                )?);
+                ) {
+                    return None;
+                }
             }
-            out
+            Some(out)
         }))
     }
 }
