@@ -14,7 +14,9 @@ item claims it again with cost `HOLDING` (negative), and a holder owns its item 
 the other claims say; an agent strips the
 atoms of items others own from its desires, and drops a desire left with no goal. A
 claim is released when the agent gives the atom up (its desire dropped), so another
-agent may take the item.
+agent may take the item, and when the atom is achieved: the release says so
+(`achieved`), the group believes the atom and every claim on the item ends, so work
+that comes back (the atom false again) is claimed afresh by whoever is nearer then.
 """
 
 from __future__ import annotations

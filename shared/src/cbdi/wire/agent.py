@@ -294,9 +294,9 @@ class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
 
     How claims decide is `cbdi_scheduler.claims` (docs/agents.md): claims made about the
     same time compete by `cost` (the claimer's way to the object) and the load each
-    claimer already has; a later claim takes the object over only when it is clearly
-    cheaper than the owner's. `achieved`: a release because the claimer achieved the
-    goal atom (`["delivered", "p1"]`, its second symbol the item): the group believes it.
+    claimer already has; a much later claim never takes the object over. `achieved`: a
+    release because the claimer achieved the goal atom (`["delivered", "p1"]`, its
+    second symbol the item): the group believes it, and every claim on the object ends.
     """
 
     agent: AgentName
