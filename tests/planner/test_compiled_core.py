@@ -38,10 +38,9 @@ from test_features import TIL as TIL_DOMAIN
 
 from cbdi_planner.continual import PartialPlanFound, RoundBound, RoundDone, SearchThread
 from cbdi_planner.core import CoreError, compiled, selected
-from cbdi_planner.expansion import Expander, Node, needs
+from cbdi_planner.expansion import Expander, Node
 from cbdi_planner.grounding import ground
 from cbdi_planner.heuristic import RelaxedPlanGraph
-from cbdi_planner.moves import CompiledMoves
 from cbdi_planner.pddl import parse_domain, parse_problem
 from cbdi_planner.search import Budget, SearchResult, search
 from cbdi_planner.state import apply_end, apply_start, apply_til, initial_state
@@ -475,20 +474,3 @@ def test_a_task_is_compiled_once(monkeypatch: pytest.MonkeyPatch) -> None:
     moves: Callable[..., object] = first._compiled.core.moves
     with pytest.raises(ValueError, match="outside the task"):
         moves(b"\x01" * 4096, (), (), 0, [], 0, None, False, 0.01)
-
-
-def test_a_timeline_of_other_codes_is_extended_by_them() -> None:
-    """A node whose timeline another task's compiled moves made (their snap codes) is
-    scheduled through its own oracle: the same schedules."""
-    task = recycling("paper-7x7")
-    python = Expander(task, 0.01, core="python")
-    ex = Expander(task, 0.01, core="compiled")
-    module = compiled("compiled")
-    assert module is not None
-    ex._compiled = CompiledMoves._build(task, module, needs(task))
-    nodes = [e.root(initial_state(task)) for e in (python, Expander(task, 0.01, core="compiled"))]
-    assert nodes[1].timeline.oracle is not ex._compiled.oracle
-    views = []
-    for e, node in zip((python, ex), nodes, strict=True):
-        views.append([_schedule_view(e.schedule(node.timeline, m)) for m in e.moves(node)])
-    assert views[0] == views[1] and any(v is not None for v in views[0])
