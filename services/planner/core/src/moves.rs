@@ -271,7 +271,7 @@ impl Moves {
         }
         Ok(py.detach(|| {
             let snaps = self.oracle.get().snaps.read().expect("interference lock");
-            let mut out = net.clone();
+            let mut out: Option<Schedule> = None;
             for p in &placing.steps {
                 let coming: Coming = (
                     p.running
@@ -288,21 +288,19 @@ impl Moves {
                     END => self.actions[p.action].codes.1,
                     _ => self.actions[p.action].codes.0,
                 };
-                let (kind, partner, low, high) = (p.kind, p.partner, p.low, p.high);
-                if !out.append(
+                let from = out.as_ref().unwrap_or(net);
+                out = Some(from.extended(
                     &snaps,
-                    kind,
-                    partner,
-                    low,
-                    high,
+                    p.kind,
+                    p.partner,
+                    p.low,
+                    p.high,
                     code,
                     Some(&coming),
                     epsilon,
-                ) {
-                    return None;
-                }
+                )?);
             }
-            Some(out)
+            out
         }))
     }
 }

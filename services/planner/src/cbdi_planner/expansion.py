@@ -18,7 +18,7 @@ from cbdi_planner.state import State, apply_end, apply_start, apply_til, is_goal
 from cbdi_planner.stn import END, INST, START, TIL, Future, Oracle, Step, Timeline
 from cbdi_planner.task import Task
 
-__all__ = ["Expander", "Move", "Node", "Successor", "needs"]
+__all__ = ["Expander", "Move", "Node", "Successor"]
 
 Running = tuple[tuple[int, int], ...]
 # A step to append, with the state after it and the actions running then.
@@ -64,12 +64,6 @@ class Move:
 Successor = tuple[State, Timeline, Running]
 
 
-def needs(task: Task) -> list[int]:
-    """What each action needs before it starts: its start condition, and the part of
-    its invariant the start does not add (the invariant holds right after it)."""
-    return [a.start.pre | (a.inv & ~a.start.add) for a in task.actions]
-
-
 class Expander:
     """Generate and evaluate successors; counts what it does in `generated`/`evaluated`."""
 
@@ -90,23 +84,24 @@ class Expander:
         self.generated = 0
         self.evaluated = 0
         self.inconsistent = 0
-        # Compiled: the moves made and scheduled there, the task handed over once.
-        self._compiled = CompiledMoves.of(task, module, needs) if module is not None else None
-        self._oracle: Oracle | None = None
-        self._needs: list[int] = []
-        self._by_fact: dict[int, list[int]] = {}
-        if self._compiled is not None:
-            self._oracle = self._compiled.oracle
-            self._til_snaps = list(self._compiled.tils)
-            return
-        self._til_snaps = til_snaps(task)
-        self._needs = needs(task)
+        # What an action needs before it starts: its start condition, and the part of
+        # its invariant the start does not add (the invariant holds right after it).
+        self._needs = [a.start.pre | (a.inv & ~a.start.add) for a in task.actions]
         # Each action under the lowest fact it needs (-1: none), so `successors` looks
         # only at actions whose condition can hold in a state.
+        self._by_fact: dict[int, list[int]] = {}
         for action in task.actions:
             need = self._needs[action.index]
             low = (need & -need).bit_length() - 1
             self._by_fact.setdefault(low, []).append(action.index)
+        # Compiled: the same moves, made and scheduled there (the candidates' needs
+        # tested there too).
+        self._compiled = CompiledMoves.of(task, module, self._needs) if module is not None else None
+        self._oracle: Oracle | None = None
+        self._til_snaps = til_snaps(task)
+        if self._compiled is not None:
+            self._oracle = self._compiled.oracle
+            self._til_snaps = list(self._compiled.tils)
 
     def root(self, state: State) -> Node:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
@@ -146,11 +141,8 @@ class Expander:
         A lazy search keeps these and schedules (`schedule`) only the ones it takes.
         """
         if self._compiled is not None:
-            return self._moves_compiled(node, helpful_only, self._compiled)
-        return self._moves_python(node, helpful_only)
-
-    def _moves_python(self, node: Node, helpful_only: bool) -> Iterator[Move]:
-        """`moves` by the Python core, one happening at a time."""
+            yield from self._moves_compiled(node, helpful_only, self._compiled)
+            return
         state, task, steps = node.state, self.task, len(node.timeline.steps)
         for index, start_step in node.running:
             action = task.actions[index]
@@ -216,18 +208,19 @@ class Expander:
             self.compress,
             self.epsilon,
         )
-        snaps, base, from_bytes = compiled.snaps, state.nums, int.from_bytes
+        snaps = compiled.snaps
         for placing, *made in found:
             placed = []
             for kind, index, partner, low, high, packed, nums, open_, til, running in made:
                 new = State(
-                    from_bytes(packed, "little"), base if nums is None else nums, open_, til
+                    int.from_bytes(packed, "little"),
+                    state.nums if nums is None else nums,
+                    open_,
+                    til,
                 )
-                placed.append(
-                    (Step(kind, index, snaps[kind][index], partner, low, high), new, running)
-                )
-            self.generated += 1
-            yield Move(new, running, tuple(placed), placing)
+                step = Step(kind, index, snaps[kind][index], partner, low, high)
+                placed.append((step, new, running))
+            yield self._move(new, running, tuple(placed), placing)
 
     def _move(
         self, state: State, running: Running, steps: tuple[Placed, ...], placing: Any = None
@@ -243,9 +236,8 @@ class Expander:
             if net is None:
                 self.inconsistent += 1
                 return None
-            placed = move.steps  # one step, or a compressed action's two
-            added = (placed[0][0],) if len(placed) == 1 else (placed[0][0], placed[1][0])
-            return Timeline(timeline.steps + added, net, self.epsilon, net.span, timeline.oracle)
+            steps = (*timeline.steps, *(placed[0] for placed in move.steps))
+            return Timeline(steps, net, self.epsilon, net.span, timeline.oracle)
         for step, state, running in move.steps:
             extended = timeline.extend(step, self._future(state, running))
             if extended is None:

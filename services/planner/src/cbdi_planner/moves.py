@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
@@ -65,18 +64,16 @@ class CompiledMoves:
     tils: tuple[Snap, ...]
 
     @classmethod
-    def of(
-        cls, task: Task, module: ModuleType, needs: Callable[[Task], list[int]]
-    ) -> CompiledMoves:
+    def of(cls, task: Task, module: ModuleType, needs: list[int]) -> CompiledMoves:
         """The task's compiled moves, built once per task of the same actions and timed
-        literals (`needs(task)[a]`: the facts action `a` needs before it starts)."""
+        literals (`needs[a]`: the facts action `a` needs before it starts)."""
         key = (id(task.actions), id(task.tils), len(task.facts))
         with _LOCK:
             found = _CACHE.get(key)
             if found is not None:
                 _CACHE.move_to_end(key)
                 return found[0]
-        built = cls._build(task, module, needs(task))
+        built = cls._build(task, module, needs)
         with _LOCK:
             # the entry holds what the key's ids name, so they stay theirs
             _CACHE[key] = (built, (task.actions, task.tils))
