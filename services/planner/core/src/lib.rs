@@ -14,10 +14,8 @@
 //! A call runs without the interpreter lock: a service's event loop keeps going while
 //! its planner explores.
 
-mod apply;
 mod extract;
 mod graph;
-mod moves;
 mod numeric;
 mod pyset;
 mod schedule;
@@ -187,8 +185,6 @@ fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sums_exactly, m)?)?;
     m.add_class::<Graph>()?;
     m.add_class::<Interference>()?;
-    m.add_class::<moves::Moves>()?;
-    m.add_class::<moves::Placing>()?;
     m.add_class::<Schedule>()?;
     m.add_class::<starts::Starts>()?;
     Ok(())

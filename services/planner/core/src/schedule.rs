@@ -64,7 +64,7 @@ pub struct Schedule {
 
 /// The happenings certain to come after a step: `(start step, end snap code)` of each
 /// running action, `(time, snap code)` of each timed literal still to happen.
-pub(crate) type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
+type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
 
 /// A running action's future end: its start step, its bound, the steps it must follow.
 struct Wait {
@@ -141,7 +141,7 @@ impl Schedule {
 }
 
 impl Schedule {
-    pub(crate) fn len(&self) -> usize {
+    fn len(&self) -> usize {
         self.times.len()
     }
 
@@ -208,7 +208,7 @@ impl Schedule {
     }
 
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn extended(
+    fn extended(
         &self,
         snaps: &[Touches],
         kind: u8,

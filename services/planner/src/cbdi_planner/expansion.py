@@ -8,15 +8,13 @@ invariant and leaves the timeline consistent.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 from cbdi_planner.core import compiled
 from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
-from cbdi_planner.moves import CompiledMoves, til_snaps
 from cbdi_planner.state import State, apply_end, apply_start, apply_til, is_goal
 from cbdi_planner.stn import END, INST, START, TIL, Future, Oracle, Step, Timeline
-from cbdi_planner.task import Task
+from cbdi_planner.task import Snap, Task
 
 __all__ = ["Expander", "Move", "Node", "Successor"]
 
@@ -46,14 +44,12 @@ class Node:
 class Move:
     """A happening applied to a node's state: the new state, and the steps to schedule.
 
-    Two steps for a compressed action (its start and end), one otherwise. `placing`:
-    the compiled core's steps to schedule (None: the Python core's move).
+    Two steps for a compressed action (its start and end), one otherwise.
     """
 
     state: State
     running: Running
     steps: tuple[Placed, ...]
-    placing: Any = field(default=None, compare=False)
 
     @property
     def first(self) -> Step:
@@ -80,6 +76,7 @@ class Expander:
         self.compress = compress
         self.rpg = RelaxedPlanGraph.of(task, compress=compress, core=core)
         module = compiled(core)
+        self._oracle = Oracle(module) if module is not None else None
         self.subgoal: int | None = None
         self.generated = 0
         self.evaluated = 0
@@ -94,14 +91,13 @@ class Expander:
             need = self._needs[action.index]
             low = (need & -need).bit_length() - 1
             self._by_fact.setdefault(low, []).append(action.index)
-        # Compiled: the same moves, made and scheduled there (the candidates' needs
-        # tested there too).
-        self._compiled = CompiledMoves.of(task, module, self._needs) if module is not None else None
-        self._oracle: Oracle | None = None
-        self._til_snaps = til_snaps(task)
-        if self._compiled is not None:
-            self._oracle = self._compiled.oracle
-            self._til_snaps = list(self._compiled.tils)
+        # Compiled: the same candidates, the needs tested there too.
+        self._starts = (
+            module.Starts([_bits(n) for n in self._needs]) if module is not None else None
+        )
+        self._til_snaps = [
+            Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils
+        ]
 
     def root(self, state: State) -> Node:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
@@ -140,9 +136,6 @@ class Expander:
 
         A lazy search keeps these and schedules (`schedule`) only the ones it takes.
         """
-        if self._compiled is not None:
-            yield from self._moves_compiled(node, helpful_only, self._compiled)
-            return
         state, task, steps = node.state, self.task, len(node.timeline.steps)
         for index, start_step in node.running:
             action = task.actions[index]
@@ -161,9 +154,10 @@ class Expander:
                 step = Step(TIL, state.til, self._til_snaps[state.til], -1, when, when)
                 yield self._move(new, node.running, ((step, new, node.running),))
         facts, needs = state.facts, self._needs
+        tested = self._starts is not None and not helpful_only  # their needs hold
         for index in self._candidates(node, helpful_only):
             action = task.actions[index]
-            if needs[index] & ~facts:
+            if not tested and needs[index] & ~facts:
                 continue
             new = apply_start(task, state, action)
             if new is None:
@@ -191,53 +185,12 @@ class Expander:
             placed = ((step, new, running), (end, ended, node.running))
             yield self._move(ended, node.running, placed)
 
-    def _moves_compiled(
-        self, node: Node, helpful_only: bool, compiled: CompiledMoves
-    ) -> Iterator[Move]:
-        """`moves` by the compiled core: every move made in one call."""
-        state, steps = node.state, node.timeline.steps
-        facts = state.facts
-        found = compiled.core.moves(
-            facts.to_bytes((facts.bit_length() + 7) // 8, "little"),
-            state.nums,
-            state.open,
-            state.til,
-            [(i, s, steps[s].low, steps[s].high) for i, s in node.running],
-            len(steps),
-            self._candidates(node, True) if helpful_only else None,
-            self.compress,
-            self.epsilon,
-        )
-        snaps = compiled.snaps
-        for placing, *made in found:
-            placed = []
-            for kind, index, partner, low, high, packed, nums, open_, til, running in made:
-                new = State(
-                    int.from_bytes(packed, "little"),
-                    state.nums if nums is None else nums,
-                    open_,
-                    til,
-                )
-                step = Step(kind, index, snaps[kind][index], partner, low, high)
-                placed.append((step, new, running))
-            yield self._move(new, running, tuple(placed), placing)
-
-    def _move(
-        self, state: State, running: Running, steps: tuple[Placed, ...], placing: Any = None
-    ) -> Move:
+    def _move(self, state: State, running: Running, steps: tuple[Placed, ...]) -> Move:
         self.generated += 1
-        return Move(state, running, steps, placing)
+        return Move(state, running, steps)
 
     def schedule(self, timeline: Timeline, move: Move) -> Timeline | None:
         """Return `timeline` with the steps of `move` appended (None: inconsistent)."""
-        compiled = self._compiled
-        if move.placing is not None and compiled is not None and timeline.oracle is compiled.oracle:
-            net = compiled.core.schedule(timeline.net, move.placing, self.epsilon)
-            if net is None:
-                self.inconsistent += 1
-                return None
-            steps = (*timeline.steps, *(placed[0] for placed in move.steps))
-            return Timeline(steps, net, self.epsilon, net.span, timeline.oracle)
         for step, state, running in move.steps:
             extended = timeline.extend(step, self._future(state, running))
             if extended is None:
@@ -250,6 +203,9 @@ class Expander:
         """Return, in index order, the actions that may start in `node` (helpful ones)."""
         if helpful_only:
             return sorted(a for kind, a in node.helpful if kind in (START, INST))
+        if self._starts is not None:  # those whose needs hold, in index order
+            facts = node.state.facts
+            return self._starts.candidates(facts.to_bytes((facts.bit_length() + 7) // 8, "little"))
         by_fact, facts = self._by_fact, node.state.facts
         out = list(by_fact.get(-1, ()))
         while facts:
@@ -276,3 +232,13 @@ class Expander:
     def dead(node: Node) -> bool:
         """Tell whether the heuristic proved the node a dead end."""
         return node.h >= INFINITE
+
+
+def _bits(mask: int) -> list[int]:
+    """The positions of the set bits of `mask`."""
+    out = []
+    while mask:
+        low = mask & -mask
+        out.append(low.bit_length() - 1)
+        mask ^= low
+    return out
