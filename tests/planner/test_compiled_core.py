@@ -8,20 +8,40 @@ every shipped recycling problem, on the IPC temporal problems the planner solves
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import random
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_features import (
+    CONDITIONAL,
+    CONDITIONAL_PROBLEM,
+    DURATIONS,
+    DURATIONS_PROBLEM,
+    MATCHES,
+    MATCHES_PROBLEM,
+    MIXED,
+    MIXED_PROBLEM,
+    NEGATIVE,
+    NEGATIVE_PROBLEM,
+    NUMERIC,
+    NUMERIC_PROBLEM,
+    TIL_PROBLEM,
+)
+from test_features import TIL as TIL_DOMAIN
 
 from cbdi_planner.continual import PartialPlanFound, RoundBound, RoundDone, SearchThread
 from cbdi_planner.core import CoreError, compiled, selected
-from cbdi_planner.expansion import Expander
+from cbdi_planner.expansion import Expander, Node, needs
 from cbdi_planner.grounding import ground
 from cbdi_planner.heuristic import RelaxedPlanGraph
+from cbdi_planner.moves import CompiledMoves
 from cbdi_planner.pddl import parse_domain, parse_problem
 from cbdi_planner.search import Budget, SearchResult, search
 from cbdi_planner.state import apply_end, apply_start, apply_til, initial_state
@@ -164,9 +184,7 @@ def walk(task: Task, seed: int, length: int) -> list[object]:
 
 
 @settings(max_examples=25, deadline=None)
-@given(
-    seed=st.integers(0, 10_000), problem=st.sampled_from(["paper-7x7", "zenotravel", "hops"])
-)
+@given(seed=st.integers(0, 10_000), problem=st.sampled_from(["paper-7x7", "zenotravel", "hops"]))
 def test_heuristic_values_are_the_same_on_random_states(seed: int, problem: str) -> None:
     if problem == "hops":
         task = hops()
@@ -319,3 +337,158 @@ def test_random_timelines_are_the_same(
         assert list(out[0].times) == list(out[1].times) and out[0].span == out[1].span
         assert [list(e) for e in out[0].net.edges] == [list(e) for e in out[1].net.edges]
         lines, running = [out[0], out[1]], after
+
+
+# Small tasks with what the shipped problems lack: numeric conditions and effects,
+# computed and bounded durations, timed literals, conditional effects, instantaneous
+# actions, negative conditions, required concurrency.
+FEATURES = {
+    "numeric": (NUMERIC, NUMERIC_PROBLEM),
+    "durations": (DURATIONS, DURATIONS_PROBLEM),
+    "til": (TIL_DOMAIN, TIL_PROBLEM),
+    "conditional": (CONDITIONAL, CONDITIONAL_PROBLEM),
+    "mixed": (MIXED, MIXED_PROBLEM),
+    "negative": (NEGATIVE, NEGATIVE_PROBLEM),
+    "matches": (MATCHES, MATCHES_PROBLEM),
+}
+
+
+def feature(name: str) -> Task:
+    domain_text, problem_text = FEATURES[name]
+    domain = parse_domain(domain_text)
+    return ground(domain, parse_problem(problem_text, domain))
+
+
+@pytest.mark.parametrize("name", sorted(FEATURES))
+def test_feature_searches_are_the_same(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
+    for compress in (False, True):
+        python, rust = both(
+            monkeypatch, feature(name), budget=Budget(max_expansions=600), compress=compress
+        )
+        assert python == rust
+
+
+def task_named(name: str) -> Task:
+    if name in FEATURES:
+        return feature(name)
+    if name == "hops":
+        return hops()
+    if name == "zenotravel":
+        return ipc("zenotravel", "p02")
+    return recycling(name)
+
+
+def _schedule_view(timeline: Timeline | None) -> object:
+    if timeline is None:
+        return None
+    edges = [tuple(map(tuple, e)) for e in timeline.edges]
+    return (timeline.steps, tuple(timeline.times), edges, timeline.span)
+
+
+def observe(ex: Expander, seed: int, length: int) -> list[object]:
+    """A random walk through the nodes `ex` makes: at each node, every move (helpful
+    ones too) with its schedule, and the counts; the same seed walks the same way on
+    either core if they are the same."""
+    rng = random.Random(seed)
+    node: Node = ex.root(walk(ex.task, seed, 1)[0])  # type: ignore[arg-type]
+    seen: list[object] = []
+    for _ in range(length):
+        for helpful_only in (False, True):
+            moves = list(ex.moves(node, helpful_only))
+            timelines = [ex.schedule(node.timeline, m) for m in moves]
+            seen.append([(m.state, m.running, m.steps) for m in moves])
+            seen.append([_schedule_view(t) for t in timelines])
+            seen.append((ex.generated, ex.inconsistent))
+        live = [(m, t) for m, t in zip(moves, timelines, strict=True) if t is not None]
+        if not live:
+            break
+        move, timeline = rng.choice(live)
+        node = ex.evaluate(move.state, timeline, move.running)
+    return seen
+
+
+_WALKED = ["paper-7x7", "warehouse-15x15", "zenotravel", "hops", *sorted(FEATURES)]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    problem=st.sampled_from(_WALKED),
+    compress=st.booleans(),
+)
+def test_moves_are_the_same_on_random_nodes(seed: int, problem: str, compress: bool) -> None:
+    """`Expander.moves` and `schedule` (the compiled core: one call per node, one per
+    move): the same moves in the same order, states, steps, schedules and counts."""
+    task = task_named(problem)
+    python, rust = (
+        observe(Expander(task, 0.01, compress=compress, core=core), seed, 14)
+        for core in ("python", "compiled")
+    )
+    assert python == rust
+
+
+class _Broken:
+    """The compiled core's moves with one thing wrong."""
+
+    def __init__(self, core: Any, how: str) -> None:
+        self.core, self.how = core, how
+
+    def moves(self, *args: object) -> list[tuple[Any, ...]]:
+        found = list(self.core.moves(*args))
+        if self.how == "order":
+            return found[::-1]
+        if self.how == "dropped":
+            return found[:-1]
+        if self.how == "fact" and found:
+            placing, *placed = found[0]
+            kind, index, partner, low, high, packed, *rest = placed[-1]
+            packed = bytes([packed[0] ^ 1]) + packed[1:] if packed else b"\x01"
+            found[0] = (placing, *placed[:-1], (kind, index, partner, low, high, packed, *rest))
+        return found
+
+    def schedule(self, net: Any, placing: Any, epsilon: float) -> Any:
+        return self.core.schedule(net, placing, epsilon * (2 if self.how == "epsilon" else 1))
+
+
+@pytest.mark.parametrize("how", ["order", "dropped", "fact", "epsilon"])
+def test_a_broken_compiled_path_is_caught(how: str) -> None:
+    """The comparison above finds a compiled core that orders, drops, changes a state
+    or schedules differently."""
+    task = recycling("paper-7x7")
+    python = observe(Expander(task, 0.01, core="python"), 1, 14)
+    ex = Expander(task, 0.01, core="compiled")
+    assert observe(ex, 1, 14) == python
+    compiled_moves = ex._compiled
+    assert compiled_moves is not None
+    broken = Expander(task, 0.01, core="compiled")
+    broken._compiled = dataclasses.replace(compiled_moves, core=_Broken(compiled_moves.core, how))
+    assert observe(broken, 1, 14) != python
+
+
+def test_a_task_is_compiled_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Searches of one task share its compiled moves (and the codes of its snaps)."""
+    task = recycling("paper-7x7")
+    first, second = (Expander(task, 0.01, core="compiled") for _ in range(2))
+    assert first._compiled is second._compiled and first._compiled is not None
+    other = Expander(hops(), 0.01, core="compiled")
+    assert other._compiled is not first._compiled
+    moves: Callable[..., object] = first._compiled.core.moves
+    with pytest.raises(ValueError, match="outside the task"):
+        moves(b"\x01" * 4096, (), (), 0, [], 0, None, False, 0.01)
+
+
+def test_a_timeline_of_other_codes_is_extended_by_them() -> None:
+    """A node whose timeline another task's compiled moves made (their snap codes) is
+    scheduled through its own oracle: the same schedules."""
+    task = recycling("paper-7x7")
+    python = Expander(task, 0.01, core="python")
+    ex = Expander(task, 0.01, core="compiled")
+    module = compiled("compiled")
+    assert module is not None
+    ex._compiled = CompiledMoves._build(task, module, needs(task))
+    nodes = [e.root(initial_state(task)) for e in (python, Expander(task, 0.01, core="compiled"))]
+    assert nodes[1].timeline.oracle is not ex._compiled.oracle
+    views = []
+    for e, node in zip((python, ex), nodes, strict=True):
+        views.append([_schedule_view(e.schedule(node.timeline, m)) for m in e.moves(node)])
+    assert views[0] == views[1] and any(v is not None for v in views[0])

@@ -7,15 +7,19 @@
 //! whole heuristic estimate in one call (`RelaxedPlanGraph.estimate`: the layered
 //! exploration of the temporal relaxed planning graph and FF's relaxed plan extracted
 //! from it, with CPython's set order emulated where it decides, `pyset`), the hottest
-//! part of a search, and the simple temporal network of a partial plan
+//! part of a search, the simple temporal network of a partial plan
 //! (`cbdi_planner.stn.Timeline`): which earlier steps a new one must follow, and the
-//! earliest consistent times.
+//! earliest consistent times, and a node's successors (`Expander.moves`: every
+//! happening applied in one call, `moves`, with the semantics of `apply`) and a move's
+//! steps put on its timeline in one call (`Expander.schedule`).
 //!
 //! A call runs without the interpreter lock: a service's event loop keeps going while
 //! its planner explores.
 
+mod apply;
 mod extract;
 mod graph;
+mod moves;
 mod numeric;
 mod pyset;
 mod schedule;
@@ -185,6 +189,8 @@ fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sums_exactly, m)?)?;
     m.add_class::<Graph>()?;
     m.add_class::<Interference>()?;
+    m.add_class::<moves::Moves>()?;
+    m.add_class::<moves::Placing>()?;
     m.add_class::<Schedule>()?;
     m.add_class::<starts::Starts>()?;
     Ok(())

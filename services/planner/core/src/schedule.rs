@@ -64,7 +64,7 @@ pub struct Schedule {
 
 /// The happenings certain to come after a step: `(start step, end snap code)` of each
 /// running action, `(time, snap code)` of each timed literal still to happen.
-type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
+pub(crate) type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
 
 /// A running action's future end: its start step, its bound, the steps it must follow.
 struct Wait {
@@ -141,7 +141,7 @@ impl Schedule {
 }
 
 impl Schedule {
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.times.len()
     }
 
@@ -207,8 +207,9 @@ impl Schedule {
         chunk.edge_off.push(chunk.edge_src.len());
     }
 
+    /// `Timeline.extend`: the schedule with a step appended (None: inconsistent).
     #[allow(clippy::too_many_arguments)]
-    fn extended(
+    pub(crate) fn extended(
         &self,
         snaps: &[Touches],
         kind: u8,
@@ -219,6 +220,25 @@ impl Schedule {
         future: Option<&Coming>,
         eps: f64,
     ) -> Option<Schedule> {
+        let mut out = self.clone();
+        out.append(snaps, kind, partner, low, high, code, future, eps)
+            .then_some(out)
+    }
+
+    /// `extended` in place (several steps appended copy the schedule once): false when
+    /// inconsistent, the schedule then half extended (to be dropped).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn append(
+        &mut self,
+        snaps: &[Touches],
+        kind: u8,
+        partner: i64,
+        low: f64,
+        high: f64,
+        code: usize,
+        future: Option<&Coming>,
+        eps: f64,
+    ) -> bool {
         let n = self.len();
         let mut incoming: Vec<(usize, f64)> = self
             .interfering(snaps, code)
@@ -228,25 +248,24 @@ impl Schedule {
         if kind == END {
             incoming.push((partner as usize, low));
         }
-        let mut out = self.clone();
-        out.push(&snaps[code], kind, partner, high, code, &incoming);
+        self.push(&snaps[code], kind, partner, high, code, &incoming);
         // `Timeline._base`
         let mut value = if kind == TIL { low } else { 0.0 };
         for &(i, w) in &incoming {
-            if out.times[i] + w > value {
-                value = out.times[i] + w;
+            if self.times[i] + w > value {
+                value = self.times[i] + w;
             }
         }
-        out.times.push(value);
+        self.times.push(value);
         let mut waits = Vec::new();
         if let Some((ends, _)) = future {
             for &(start, end_code) in ends {
-                let (c, j) = out.chunk(start);
+                let (c, j) = self.chunk(start);
                 let bound = c.highs[j];
                 if bound == f64::INFINITY {
                     continue;
                 }
-                let after: Vec<usize> = out
+                let after: Vec<usize> = self
                     .interfering(snaps, end_code)
                     .into_iter()
                     .filter(|&k| k != start)
@@ -260,15 +279,17 @@ impl Schedule {
                 }
             }
         }
-        let touched = out.settle(n, &waits, eps)?;
+        let Some(touched) = self.settle(n, &waits, eps) else {
+            return false;
+        };
         if let Some((_, deadlines)) = future {
             for &(when, snap) in deadlines {
-                let late = out
+                let late = self
                     .interfering(snaps, snap)
                     .into_iter()
-                    .any(|k| out.times[k] + eps > when + TOL);
+                    .any(|k| self.times[k] + eps > when + TOL);
                 if late {
-                    return None;
+                    return false;
                 }
             }
         }
@@ -276,13 +297,13 @@ impl Schedule {
         // times only grow (and are not negative), so the old span and the times that
         // changed (`touched` on) give it.
         let mut span = self.span;
-        for k in touched..out.len() {
-            if out.kind(k) != TIL && out.times[k] > span {
-                span = out.times[k];
+        for k in touched..self.len() {
+            if self.kind(k) != TIL && self.times[k] > span {
+                span = self.times[k];
             }
         }
-        out.span = span;
-        Some(out)
+        self.span = span;
+        true
     }
 
     /// `stn._settle`: propagate earliest times from step `first` on; None on a positive

@@ -17,7 +17,7 @@ pub struct Starts {
     /// The actions that need no fact.
     always: Vec<u32>,
     /// Per action, the facts it needs, sorted.
-    needs: Vec<Vec<u32>>,
+    pub(crate) needs: Vec<Vec<u32>>,
 }
 
 fn holds(facts: &[u8], bit: u32) -> bool {
@@ -29,7 +29,7 @@ fn holds(facts: &[u8], bit: u32) -> bool {
 impl Starts {
     /// `needs[a]`: the facts (bit positions) action `a` needs before it starts.
     #[new]
-    fn new(needs: Vec<Vec<u32>>) -> Self {
+    pub(crate) fn new(needs: Vec<Vec<u32>>) -> Self {
         let mut by_fact: Vec<Vec<u32>> = Vec::new();
         let mut always = Vec::new();
         let needs: Vec<Vec<u32>> = needs
@@ -62,7 +62,13 @@ impl Starts {
     /// The actions, in index order, whose needs all hold in `facts` (the state's facts
     /// as the little-endian bytes of its int).
     fn candidates(&self, facts: &Bound<'_, PyBytes>) -> Vec<u32> {
-        let facts = facts.as_bytes();
+        self.within(facts.as_bytes())
+    }
+}
+
+impl Starts {
+    /// `candidates` of the state whose facts are the little-endian bytes `facts`.
+    pub(crate) fn within(&self, facts: &[u8]) -> Vec<u32> {
         let mut out: Vec<u32> = self.always.clone();
         let limit = facts.len().min(self.by_fact.len().div_ceil(8));
         for (i, &byte) in facts[..limit].iter().enumerate() {

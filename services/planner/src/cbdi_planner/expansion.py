@@ -8,15 +8,17 @@ invariant and leaves the timeline consistent.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from cbdi_planner.core import compiled
 from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
+from cbdi_planner.moves import CompiledMoves, til_snaps
 from cbdi_planner.state import State, apply_end, apply_start, apply_til, is_goal
 from cbdi_planner.stn import END, INST, START, TIL, Future, Oracle, Step, Timeline
-from cbdi_planner.task import Snap, Task
+from cbdi_planner.task import Task
 
-__all__ = ["Expander", "Move", "Node", "Successor"]
+__all__ = ["Expander", "Move", "Node", "Successor", "needs"]
 
 Running = tuple[tuple[int, int], ...]
 # A step to append, with the state after it and the actions running then.
@@ -44,12 +46,14 @@ class Node:
 class Move:
     """A happening applied to a node's state: the new state, and the steps to schedule.
 
-    Two steps for a compressed action (its start and end), one otherwise.
+    Two steps for a compressed action (its start and end), one otherwise. `placing`:
+    the compiled core's steps to schedule (None: the Python core's move).
     """
 
     state: State
     running: Running
     steps: tuple[Placed, ...]
+    placing: Any = field(default=None, compare=False)
 
     @property
     def first(self) -> Step:
@@ -58,6 +62,12 @@ class Move:
 
 
 Successor = tuple[State, Timeline, Running]
+
+
+def needs(task: Task) -> list[int]:
+    """What each action needs before it starts: its start condition, and the part of
+    its invariant the start does not add (the invariant holds right after it)."""
+    return [a.start.pre | (a.inv & ~a.start.add) for a in task.actions]
 
 
 class Expander:
@@ -76,28 +86,27 @@ class Expander:
         self.compress = compress
         self.rpg = RelaxedPlanGraph.of(task, compress=compress, core=core)
         module = compiled(core)
-        self._oracle = Oracle(module) if module is not None else None
         self.subgoal: int | None = None
         self.generated = 0
         self.evaluated = 0
         self.inconsistent = 0
-        # What an action needs before it starts: its start condition, and the part of
-        # its invariant the start does not add (the invariant holds right after it).
-        self._needs = [a.start.pre | (a.inv & ~a.start.add) for a in task.actions]
+        # Compiled: the moves made and scheduled there, the task handed over once.
+        self._compiled = CompiledMoves.of(task, module, needs) if module is not None else None
+        self._oracle: Oracle | None = None
+        self._needs: list[int] = []
+        self._by_fact: dict[int, list[int]] = {}
+        if self._compiled is not None:
+            self._oracle = self._compiled.oracle
+            self._til_snaps = list(self._compiled.tils)
+            return
+        self._til_snaps = til_snaps(task)
+        self._needs = needs(task)
         # Each action under the lowest fact it needs (-1: none), so `successors` looks
         # only at actions whose condition can hold in a state.
-        self._by_fact: dict[int, list[int]] = {}
         for action in task.actions:
             need = self._needs[action.index]
             low = (need & -need).bit_length() - 1
             self._by_fact.setdefault(low, []).append(action.index)
-        # Compiled: the same candidates, the needs tested there too.
-        self._starts = (
-            module.Starts([_bits(n) for n in self._needs]) if module is not None else None
-        )
-        self._til_snaps = [
-            Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils
-        ]
 
     def root(self, state: State) -> Node:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
@@ -136,6 +145,12 @@ class Expander:
 
         A lazy search keeps these and schedules (`schedule`) only the ones it takes.
         """
+        if self._compiled is not None:
+            return self._moves_compiled(node, helpful_only, self._compiled)
+        return self._moves_python(node, helpful_only)
+
+    def _moves_python(self, node: Node, helpful_only: bool) -> Iterator[Move]:
+        """`moves` by the Python core, one happening at a time."""
         state, task, steps = node.state, self.task, len(node.timeline.steps)
         for index, start_step in node.running:
             action = task.actions[index]
@@ -154,10 +169,9 @@ class Expander:
                 step = Step(TIL, state.til, self._til_snaps[state.til], -1, when, when)
                 yield self._move(new, node.running, ((step, new, node.running),))
         facts, needs = state.facts, self._needs
-        tested = self._starts is not None and not helpful_only  # their needs hold
         for index in self._candidates(node, helpful_only):
             action = task.actions[index]
-            if not tested and needs[index] & ~facts:
+            if needs[index] & ~facts:
                 continue
             new = apply_start(task, state, action)
             if new is None:
@@ -185,12 +199,53 @@ class Expander:
             placed = ((step, new, running), (end, ended, node.running))
             yield self._move(ended, node.running, placed)
 
-    def _move(self, state: State, running: Running, steps: tuple[Placed, ...]) -> Move:
+    def _moves_compiled(
+        self, node: Node, helpful_only: bool, compiled: CompiledMoves
+    ) -> Iterator[Move]:
+        """`moves` by the compiled core: every move made in one call."""
+        state, steps = node.state, node.timeline.steps
+        facts = state.facts
+        found = compiled.core.moves(
+            facts.to_bytes((facts.bit_length() + 7) // 8, "little"),
+            state.nums,
+            state.open,
+            state.til,
+            [(i, s, steps[s].low, steps[s].high) for i, s in node.running],
+            len(steps),
+            self._candidates(node, True) if helpful_only else None,
+            self.compress,
+            self.epsilon,
+        )
+        snaps, base, from_bytes = compiled.snaps, state.nums, int.from_bytes
+        for placing, *made in found:
+            placed = []
+            for kind, index, partner, low, high, packed, nums, open_, til, running in made:
+                new = State(
+                    from_bytes(packed, "little"), base if nums is None else nums, open_, til
+                )
+                placed.append(
+                    (Step(kind, index, snaps[kind][index], partner, low, high), new, running)
+                )
+            self.generated += 1
+            yield Move(new, running, tuple(placed), placing)
+
+    def _move(
+        self, state: State, running: Running, steps: tuple[Placed, ...], placing: Any = None
+    ) -> Move:
         self.generated += 1
-        return Move(state, running, steps)
+        return Move(state, running, steps, placing)
 
     def schedule(self, timeline: Timeline, move: Move) -> Timeline | None:
         """Return `timeline` with the steps of `move` appended (None: inconsistent)."""
+        compiled = self._compiled
+        if move.placing is not None and compiled is not None and timeline.oracle is compiled.oracle:
+            net = compiled.core.schedule(timeline.net, move.placing, self.epsilon)
+            if net is None:
+                self.inconsistent += 1
+                return None
+            placed = move.steps  # one step, or a compressed action's two
+            added = (placed[0][0],) if len(placed) == 1 else (placed[0][0], placed[1][0])
+            return Timeline(timeline.steps + added, net, self.epsilon, net.span, timeline.oracle)
         for step, state, running in move.steps:
             extended = timeline.extend(step, self._future(state, running))
             if extended is None:
@@ -203,9 +258,6 @@ class Expander:
         """Return, in index order, the actions that may start in `node` (helpful ones)."""
         if helpful_only:
             return sorted(a for kind, a in node.helpful if kind in (START, INST))
-        if self._starts is not None:  # those whose needs hold, in index order
-            facts = node.state.facts
-            return self._starts.candidates(facts.to_bytes((facts.bit_length() + 7) // 8, "little"))
         by_fact, facts = self._by_fact, node.state.facts
         out = list(by_fact.get(-1, ()))
         while facts:
@@ -232,13 +284,3 @@ class Expander:
     def dead(node: Node) -> bool:
         """Tell whether the heuristic proved the node a dead end."""
         return node.h >= INFINITE
-
-
-def _bits(mask: int) -> list[int]:
-    """The positions of the set bits of `mask`."""
-    out = []
-    while mask:
-        low = mask & -mask
-        out.append(low.bit_length() - 1)
-        mask ^= low
-    return out
