@@ -70,6 +70,15 @@ def needs(task: Task) -> list[int]:
     return [a.start.pre | (a.inv & ~a.start.add) for a in task.actions]
 
 
+def prepare(task: Task, core: str | None = None) -> None:
+    """Build ahead what an `Expander` of `task` needs and keeps (call from a worker
+    thread): on the compiled core the task's moves, built once per task; so an expander
+    made on a service's event loop finds them built (campus-30x30: about 100 ms)."""
+    module = compiled(core)
+    if module is not None:
+        CompiledMoves.of(task, module, needs)
+
+
 class Expander:
     """Generate and evaluate successors; counts what it does in `generated`/`evaluated`."""
 

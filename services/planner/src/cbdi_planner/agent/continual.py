@@ -54,6 +54,7 @@ from cbdi_planner.continual import (
 )
 from cbdi_planner.continual.improver import Improver
 from cbdi_planner.errors import PlannerError, Unsolvable
+from cbdi_planner.expansion import prepare
 from cbdi_planner.heuristic import RelaxedPlanGraph
 from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain
@@ -188,7 +189,9 @@ class ContinualPlanner:
             return
         self.transients.see(beliefs)
         with contextlib.suppress(GoalError, PlannerError):
-            RelaxedPlanGraph.of(self.groundings.task(beliefs, goal))  # what reaches_goal uses
+            task = self.groundings.task(beliefs, goal)
+            RelaxedPlanGraph.of(task)  # what reaches_goal uses
+            prepare(task)  # what a search of it expands with
 
     def goal_of(self, req: SearchRequest) -> list[list[str]] | None:
         """The goal `req` makes the search aim at (a revision: the union of goals)."""
