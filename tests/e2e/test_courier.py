@@ -22,6 +22,8 @@ from tests_support import BIN, cbdi_up, free_port
 
 pytestmark = pytest.mark.e2e
 
+ROOT = Path(__file__).resolve().parents[2]
+
 
 def test_courier_robots_deliver_every_parcel(tmp_path: Path) -> None:
     rec = tmp_path / "courier.mcap"
@@ -96,3 +98,48 @@ def test_work_that_comes_back_goes_to_the_robot_nearer_then(tmp_path: Path) -> N
             if e.desire == "deliver" and e.event == "achieved":
                 achieved.setdefault(e.agent, []).extend(g[1] for g in e.goal)
     assert achieved == {"robot1": ["p1", "p2"], "robot2": ["p2", "p1"]}, achieved
+
+
+def _pair(tmp_path: Path, together: bool) -> tuple[dict[str, object], list[DesireEvent]]:
+    """courier-pair in lockstep, its agent file as shipped or without `together`."""
+    scenario = ROOT / "domains/courier/scenarios/courier-pair.toml"
+    if not together:
+        agents = ROOT / "domains/courier/agents"
+        text = (agents / "courier-jobs.toml").read_text().replace(', together = "deliveries"', "")
+        text = text.replace('"../pddl/domain.pddl"', f'"{agents.parent / "pddl/domain.pddl"}"')
+        (tmp_path / "alone.toml").write_text(text)
+        body = scenario.read_text().replace("../agents/courier-jobs.toml", "alone.toml")
+        body = body.replace("../maps/", f"{agents.parent / 'maps'}/")
+        scenario = tmp_path / "courier-alone.toml"
+        scenario.write_text(body)
+    rec = tmp_path / f"pair-{together}.mcap"
+    args = [str(scenario), "--lockstep", "--json", "--quiet", "--port", str(free_port())]
+    done = cbdi_up(*args, "--record", str(rec), timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(done.stdout)
+    assert report["result"] == "done", report["reason"]
+    events = [
+        decode(m.payload, DesireEvent)
+        for m in read_messages(rec)
+        if m.key.endswith("/scheduler/desires")
+    ]
+    return report, events
+
+
+def test_two_jobs_pursued_together_take_one_round_trip(tmp_path: Path) -> None:
+    """courier-pair: p2 waits in the west for the east, p1 in the east for the west, the
+    robot starts in the west and carries one parcel at a time. Its two desires pursued
+    together are one goal, so one plan does p2 east then p1 west (11 drives: 1 + 5 + 5);
+    pursued one at a time, p1 (its name first) sends the robot east empty and p2 makes it
+    drive east again (18)."""
+    joint, events = _pair(tmp_path, together=True)
+    drives = joint["stats"]["agents"]["robot1"]["drive"]  # type: ignore[index]
+    assert drives == 11, drives
+    assert [(e.desire, e.event) for e in events if e.event in ("activated", "achieved")] == [
+        ("deliveries", "activated"),
+        ("deliver_p2", "achieved"),
+        ("deliver_p1", "achieved"),
+        ("deliveries", "achieved"),
+    ]
+    alone, _ = _pair(tmp_path, together=False)
+    assert alone["stats"]["agents"]["robot1"]["drive"] > drives + 4  # type: ignore[index]

@@ -8,6 +8,7 @@ the field (`rules[0].then[1].boost.goal[0]`) and what is wrong.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -255,8 +256,17 @@ class _Reader:
             self.belief(g, f"{where}.goal[{i}]", goal=True)
             for i, g in enumerate(self.get(d, "goal", list, f"{where}.goal"))
         )
+        name = self.get(d, "name", str, f"{where}.name")
+        together = self.opt(d, "together", str, "", where)
+        if together and (not _JOINT.fullmatch(together) or together == name):
+            raise self.fail(
+                f"{where}.together",
+                f"expected the name of a joint intention (letters, digits, _ and -, not"
+                f" the desire's own name), got {together!r}",
+            )
         return Desire(
-            name=self.get(d, "name", str, f"{where}.name"),
+            name=name,
+            together=together,
             goal=goal,
             priority=self.number(d, "priority", 0.5, where, 0.0, 1.0),
             deadline=self.number(d, "deadline", NO_DEADLINE, where, 0.0, math.inf),
@@ -291,6 +301,9 @@ class _Reader:
             name = self.check(value, str, f"{where}.del_desire")
             return RuleEffect("desire", "DEL", desire=Desire(name=name, goal=()))
         raise self.fail(where, f"unknown effect {kind!r}")
+
+
+_JOINT = re.compile(r"[A-Za-z][A-Za-z0-9_\-]{0,62}")
 
 
 def _signature(source: str, domain: Path) -> dict[str, int]:

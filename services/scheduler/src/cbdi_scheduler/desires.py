@@ -13,7 +13,7 @@ that adds a literal gives the desire the rule's span again from then for it.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, replace
 
 from cbdi.beliefs import Belief, BeliefSet
@@ -32,6 +32,8 @@ __all__ = [
     "boosted",
     "bound_condition",
     "drops",
+    "joint",
+    "ready",
     "select_desire",
 ]
 
@@ -49,6 +51,24 @@ class Desire:
     precondition: Condition = ()
     context: Condition = ()
     span: float = NO_DEADLINE  # the relative deadline it was taken up with
+    # The name of the one intention this desire may be pursued in, with every other
+    # ready desire of the same `together` and priority (`joint`); "": on its own.
+    together: str = ""
+
+    @property
+    def is_joint(self) -> bool:
+        """Whether this is the desire of a joint intention (`joint`), not a rule's."""
+        return bool(self.together) and self.name == self.together
+
+    def member(self, desire: Desire) -> bool:
+        """Whether `desire` is pursued in this joint intention's desire."""
+        return (
+            self.is_joint
+            and desire.together == self.together
+            and desire.priority == self.priority
+            and not desire.is_joint
+            and set(desire.goal) <= set(self.goal)
+        )
 
     def stretched(self, rtc_deadline: float) -> float:
         """Return the deadline of this desire while its plan executes."""
@@ -110,22 +130,34 @@ def drops(
     desires: Mapping[str, Desire],
     beliefs: BeliefSet,
     now: float,
-    active: str | None,
+    active: str | Collection[str] | None,
     executing: bool = False,
     rtc_deadline: float = 1.0,
 ) -> list[Drop]:
-    """Return the desires to drop: deadline passed, or the active one's context failed.
+    """Return the desires to drop: deadline passed, or an active one's context failed.
 
-    The `active` desire whose plan is `executing` has `rtc_deadline` times its span.
+    `active`: the desire the intention pursues (or the members of a joint one); an
+    active desire whose plan is `executing` has `rtc_deadline` times its span.
     """
+    act = {active} if isinstance(active, str) else set(active or ())
     out = []
     for name, d in sorted(desires.items()):
-        due = d.stretched(rtc_deadline) if name == active and executing else d.deadline
+        due = d.stretched(rtc_deadline) if name in act and executing else d.deadline
         if now > due:
             out.append(Drop(name, f"deadline {due:g} passed at {now:g}"))
-        elif name == active and d.context and not holds(d.context, beliefs):
+        elif name in act and d.context and not holds(d.context, beliefs):
             out.append(Drop(name, "context no longer holds"))
     return out
+
+
+def ready(desire: Desire, beliefs: BeliefSet, now: float) -> bool:
+    """Whether `desire` may be pursued now: deadline ahead, not achieved, precondition
+    holding."""
+    return (
+        now <= desire.deadline
+        and not achieved(desire, beliefs)
+        and (not desire.precondition or holds(desire.precondition, beliefs))
+    )
 
 
 def select_desire(desires: Mapping[str, Desire], beliefs: BeliefSet, now: float) -> Desire | None:
@@ -133,13 +165,51 @@ def select_desire(desires: Mapping[str, Desire], beliefs: BeliefSet, now: float)
 
     Ties go to the earlier deadline, then the name, so the choice is deterministic.
     """
-    ready = [
-        d
-        for d in desires.values()
-        if now <= d.deadline
-        and not achieved(d, beliefs)
-        and (not d.precondition or holds(d.precondition, beliefs))
-    ]
-    if not ready:
+    candidates = [d for d in desires.values() if ready(d, beliefs, now)]
+    if not candidates:
         return None
-    return min(ready, key=lambda d: (-d.priority, d.deadline, d.name))
+    return min(candidates, key=lambda d: (-d.priority, d.deadline, d.name))
+
+
+def joint(
+    chosen: Desire,
+    desires: Mapping[str, Desire],
+    beliefs: BeliefSet,
+    now: float,
+    current: Desire | None = None,
+) -> Desire:
+    """The desire an intention pursues for the goal reasoner's `chosen`: `chosen`
+    itself, or, if it may be pursued with others (`together`), the joint desire named
+    by `together`: its goal the union of the goals of every ready desire of the same
+    `together` and priority (one plan, one trip for several jobs), each desire still
+    achieved, dropped and reported on its own. If `current` is that joint desire, its
+    goal literals already achieved stay first in the goal, so that a member achieved
+    does not change the goal (and make the planner search anew); a literal no member
+    wants any more (given up, claimed by another agent) leaves it.
+    """
+    if not chosen.together:
+        return chosen
+    members = sorted(
+        (
+            d
+            for d in desires.values()
+            if d.together == chosen.together
+            and d.priority == chosen.priority
+            and not d.is_joint
+            and ready(d, beliefs, now)
+        ),
+        key=lambda d: d.name,
+    )
+    wanted = [g for d in members for g in d.goal]
+    goal: list[Belief] = []
+    if current is not None and current.name == chosen.together:
+        goal = [g for g in current.goal if g in wanted or beliefs.holds(g)]
+    goal += [g for g in dict.fromkeys(wanted) if g not in goal]
+    return Desire(
+        name=chosen.together,
+        goal=tuple(goal),
+        priority=chosen.priority,
+        deadline=max(d.deadline for d in members),
+        span=max(d.span for d in members),
+        together=chosen.together,
+    )

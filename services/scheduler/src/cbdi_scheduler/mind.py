@@ -15,8 +15,8 @@ from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, Part
 from cbdi.wire.world import ActionOutcome, Percepts, Sensed
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
-from cbdi_scheduler.desires import Desire, Drop, achieved, drops, select_desire
-from cbdi_scheduler.intentions import Command, IntentionScheduler
+from cbdi_scheduler.desires import Desire, Drop, achieved, drops, joint, select_desire
+from cbdi_scheduler.intentions import Command, Intention, IntentionScheduler
 from cbdi_scheduler.knowledge import DomainKnowledge, load_knowledge
 from cbdi_scheduler.rules import fire_rules
 
@@ -184,10 +184,12 @@ class Mind:
         current = self.intentions.current
         if current is not None and achieved(current.desire, self.beliefs):
             out.commands += self.intentions.achieved()
+            for name in self._members(current.desire):  # each its own event
+                out.events.append(self.event(self.desires.pop(name), "achieved"))
             out.events.append(self.event(current.desire, "achieved"))
             self.desires.pop(current.desire.name, None)
         cur = self.intentions.current
-        active = cur.desire.name if cur else None
+        active = set(self._members(cur.desire)) | {cur.desire.name} if cur else set()
         executing = cur is not None and bool(cur.plan_id)
         rtc = self.spec.rtc_deadline
         asked, self.withdrawn = self.withdrawn, {}
@@ -201,12 +203,15 @@ class Mind:
         for drop in dropping:
             desire = self.desires.pop(drop.desire)
             self._dropped(desire, drop.reason, out)
-            if drop.desire == active:
-                out.commands += self.intentions.drop(drop.reason)
+            if drop.desire in active and self.intentions.current is not None:
+                out.commands += self.intentions.drop(drop.reason)  # a joint one: all of it
         for name, d in list(self.desires.items()):
-            if achieved(d, self.beliefs) and name != active:
+            if achieved(d, self.beliefs) and (cur is None or name != cur.desire.name):
                 out.events.append(self.event(self.desires.pop(name), "achieved"))
         chosen = select_desire(self.desires, self.beliefs, self.now)
+        if chosen is not None:
+            now = self.intentions.current
+            chosen = joint(chosen, self.desires, self.beliefs, self.now, now and now.desire)
         before = self.intentions.current
         out.commands += self.intentions.choose(chosen)
         after = self.intentions.current
@@ -241,10 +246,20 @@ class Mind:
             out.events.append(self.event(after.desire, "activated"))  # a clean preemption
         return out
 
+    def _members(self, desire: Desire | Intention | None) -> set[str]:
+        """The names of the desires a joint intention's desire pursues (none otherwise)."""
+        if isinstance(desire, Intention):
+            desire = desire.desire
+        if desire is None or not desire.is_joint:
+            return set()
+        return {n for n, d in self.desires.items() if desire.member(d)}
+
     def _with_drops(self, commands: list[Command]) -> Reaction:
         out = Reaction(commands)
         for c in commands:
             if c.kind == "drop" and c.desire is not None:
+                for name in sorted(self._members(c.desire)):  # given up with it
+                    self._dropped(self.desires.pop(name), c.reason, out)
                 self.desires.pop(c.desire.name, None)
                 self._dropped(c.desire, c.reason, out)
             elif c.kind == "wait" and c.desire is not None:
