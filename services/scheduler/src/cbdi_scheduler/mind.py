@@ -210,8 +210,8 @@ class Mind:
                 out.events.append(self.event(self.desires.pop(name), "achieved"))
         chosen = select_desire(self.desires, self.beliefs, self.now)
         if chosen is not None:
-            now = self.intentions.current
-            chosen = joint(chosen, self.desires, self.beliefs, self.now, now and now.desire)
+            pursued = self.intentions.current.desire if self.intentions.current else None
+            chosen = joint(chosen, self.desires, self.beliefs, self.now, pursued)
         before = self.intentions.current
         out.commands += self.intentions.choose(chosen)
         after = self.intentions.current
