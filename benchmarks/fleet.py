@@ -82,6 +82,9 @@ class FleetRun:
     wall: float
     trace_digest: str
     reason: str
+    # services restarted (a kill by the freeze watchdog on a machine short of CPU, a
+    # crash): such a run is no longer a function of its inputs alone
+    restarts: int = 0
 
     @property
     def busy_fractions(self) -> list[float]:
@@ -190,6 +193,7 @@ def from_summary(
         wall=round(wall, 3),
         trace_digest=summary.get("trace_digest", ""),
         reason=summary.get("reason", ""),
+        restarts=sum(int(n) for n in summary.get("restarts", {}).values()),
     )
 
 
@@ -212,6 +216,7 @@ def read_csv(path: Path) -> list[FleetRun]:
             for name in ints:
                 values[name] = int(row[name])
             values["wall"] = float(row["wall"])
+            values["restarts"] = int(row.get("restarts") or 0)
             values["mission_time"] = float(row["mission_time"]) if row["mission_time"] else None
             out.append(FleetRun(**values))
     return out

@@ -56,6 +56,16 @@ def markdown(
         "per item.",
         "",
     ]
+    restarted = [r for r in runs if r.restarts]
+    if restarted:
+        out += [
+            f"**{len(restarted)} of {len(runs)} runs had services restarted** (the freeze "
+            "watchdog on a machine short of CPU, or a crash), so they are not a function "
+            "of their inputs alone: "
+            + ", ".join(f"{r.scenario} x{r.agents} seed {r.seed}" for r in restarted)
+            + ".",
+            "",
+        ]
     for name in maps:
         out += [f"## {name}", ""]
         out.append(

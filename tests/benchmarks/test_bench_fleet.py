@@ -120,7 +120,9 @@ def test_a_summary_gives_the_figures() -> None:
     assert run.busy_fractions == [1.0, 0.5]  # robot2 before robot10
     assert run.searches == 15 and run.actions == 60 and run.claim_changes == 3
     late = fleet.from_summary("m", 2, 1, 0, {**summary, "result": "time_limit"}, 0, 1.0)
-    assert late.mission_time is None
+    assert late.mission_time is None and late.restarts == 0
+    killed = {**summary, "restarts": {"world": 1, "robot2/planner": 2, "router": 0}}
+    assert fleet.from_summary("m", 2, 1, 0, killed, 0, 1.0).restarts == 3
 
 
 WAREHOUSE = "warehouse-15x15-bdi"
@@ -132,7 +134,7 @@ def test_the_table_and_figure_from_a_csv(tmp_path: Path) -> None:
         busy = json.dumps([0.9] * n)
         figures = (9, 9, 180 // n, 90, 18, n - 1, busy, 10.0, "d", "")
         runs.append(fleet.FleetRun(WAREHOUSE, n, len(runs) + 1, "done", 0, t, *figures))
-    late = (9, 7, 50, 60, 9, 0, "[0.5, 0.4]", 30.0, "d", "time")
+    late = (9, 7, 50, 60, 9, 0, "[0.5, 0.4]", 30.0, "d", "time", 2)
     runs.append(fleet.FleetRun(WAREHOUSE, 2, 9, "time_limit", 0, None, *late))
     fleet.write_csv(runs, tmp_path / "fleet.csv")
     assert fleet.read_csv(tmp_path / "fleet.csv") == runs
@@ -147,6 +149,7 @@ def test_the_table_and_figure_from_a_csv(tmp_path: Path) -> None:
     assert "| 2 | 2/3 | 125.0" in text and "| 2.00 |" in text  # speed-up 250/125
     assert "| 16 | the map has fewer start cells" in text
     assert "N=2 seed 9: time_limit" in text and "Work shared" in text
+    assert "1 of 5 runs had services restarted" in text and "x2 seed 9" in text
     width, height = read_png(out / "fleet.png")[:2]
     assert width > 400 and height > 200
 
