@@ -29,6 +29,7 @@ __all__ = [
     "revise_from_outcome",
     "revise_from_percepts",
     "seen_blocked",
+    "seen_others",
 ]
 
 
@@ -95,6 +96,19 @@ def revise_from_percepts(
         fresh += [instance(held, litter_type), fact("holding", me, held)]
     fresh.append(fluent("loaded_amount", me, value=float(len(p.holding))))
     return beliefs.removing(stale).adding(fresh)
+
+
+def seen_others(beliefs: BeliefSet, p: Percepts) -> BeliefSet:
+    """Return `beliefs` with `(other_in AGENT CELL)` for each other agent seen now, and
+    none for agents out of sight: who stands on a blocked cell, so that a robot held up
+    by another can ask it to make way (the recycler's `ask_way` rule)."""
+    have = set(beliefs.facts_of("other_in"))
+    want = {("other_in", o.name, cell_name(o.cell)) for o in p.others}
+    if have == want:
+        return beliefs
+    return beliefs.removing(fact(*f) for f in have - want).adding(
+        fact(*f) for f in sorted(want - have)
+    )
 
 
 def revise_from_outcome(beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:

@@ -1,7 +1,8 @@
 """The recycling robots' domain knowledge for the scheduler (`cbdi_scheduler.knowledge`).
 
 Percepts become beliefs as `events` says (cells seen free or blocked, litter seen,
-what the robot holds), with obstacles out of sight remembered a while; a claim on a
+what the robot holds, which other robots it sees where: `other_in`), with obstacles out
+of sight remembered a while; a claim on a
 litter item costs the believed path length to it (`events.Distances`, each search kept).
 Exploration: the robot remembers every cell it has sensed. Once it has stood still for
 `EXPLORE_AFTER` seconds with nothing in hand, and from then until it picks something up,
@@ -23,6 +24,7 @@ from cbdi_recycling.events import (
     revise_from_outcome,
     revise_from_percepts,
     seen_blocked,
+    seen_others,
 )
 
 __all__ = ["EXPLORE_AFTER", "RecyclingKnowledge"]
@@ -47,7 +49,9 @@ class RecyclingKnowledge:
 
     def on_percepts(self, beliefs: BeliefSet, percepts: Percepts) -> BeliefSet:
         self.blocked = seen_blocked(self.blocked, percepts)
-        revised = revise_from_percepts(beliefs, percepts, blocked=self.blocked)
+        revised = seen_others(
+            revise_from_percepts(beliefs, percepts, blocked=self.blocked), percepts
+        )
         here = cell_name(percepts.position)
         self.sensed |= {cell_name(c) for c in (*percepts.free, *percepts.blocked)} | {here}
         if here != self.at[0]:

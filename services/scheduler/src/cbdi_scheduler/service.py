@@ -8,7 +8,7 @@ planner, plans and early-arrest requests to the executor.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from itertools import count
 
@@ -16,7 +16,7 @@ from msgspec.structs import replace
 
 from cbdi import keys
 from cbdi.beliefs import BeliefsSender
-from cbdi.bus import publish, sequenced_inputs, serve
+from cbdi.bus import publish, request, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
@@ -40,7 +40,8 @@ from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import PERCEPTS, ActionOutcome, EpochAck, Percepts, Sensed, Tick
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
-from cbdi_scheduler.requests import serve_request
+from cbdi_scheduler.requests import prepare_request
+from cbdi_scheduler.rules import Ask
 from cbdi_scheduler.state import PlanLog, agent_state
 
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
@@ -60,6 +61,7 @@ INPUTS: tuple[type[Message], ...] = (
 
 
 MAP_WAIT = 30.0  # wall seconds between "still waiting for the world" warnings
+ASK_TIMEOUT = 2.0  # wall seconds an asked agent has to answer a rule's ask
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,8 @@ class SchedulerService:
         self.beliefs_out = BeliefsSender(self.agent)  # what changed, every epoch
         self.plan_log = PlanLog()  # the executing plan's steps, for `on_state`
         self.members: list[str] = []  # the world's lockstep members (from its info)
+        # Agents' asks served but not yet applied: (the asker's epoch, the change).
+        self.deferred: list[tuple[int, Callable[[], None]]] = []
         self.lockstep = Lockstep(
             self.input_keys(),
             lambda first: ctx.start(self.epochs(first), name="epochs"),
@@ -150,6 +154,8 @@ class SchedulerService:
         """React to one input and publish what follows (beliefs first after percepts)."""
         if isinstance(msg, EpochAck | Tick):
             return
+        if isinstance(msg, PERCEPTS):
+            self.apply_asked(msg.epoch)
         reaction = self.react(msg)
         if isinstance(msg, PERCEPTS):  # beliefs first: the planner plans from them
             update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
@@ -248,14 +254,22 @@ class SchedulerService:
         """Serve another agent's request (the next cycle reacts to what it changed).
 
         Asked on `.../rpc/request/<group>` (the router lets only that group's identities
-        ask there), the group is the key's: a request naming another is refused.
+        ask there), the group is the key's: a request naming another is refused. An
+        agent's ask (it names its epoch) changes the mind before the percepts of the
+        epoch after it, whenever it came: in lockstep the asker waits for the answer
+        before it acknowledges its epoch, so the change lands in the same epoch every run.
         """
         group = keys.request_group(key)
         if group and group != req.group:
             why = f"group {req.group!r} named, but asked under {group!r} (the key {key})"
             reply = AgentReply(accepted=False, reason=why)
         else:
-            reply = serve_request(self.mind, req)
+            served = prepare_request(self.mind, req)
+            reply = served.reply
+            if served.apply is not None and req.epoch >= 0 and req.epoch >= self.mind.epoch:
+                self.deferred.append((req.epoch, served.apply))
+            elif served.apply is not None:
+                served.apply()
         log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
         log(
             "agent_request",
@@ -266,6 +280,41 @@ class SchedulerService:
             reason=reply.reason,
         )
         return reply
+
+    def apply_asked(self, epoch: int) -> None:
+        """Apply the asks of epochs before `epoch`, in the order they came."""
+        due = [apply for asked, apply in self.deferred if asked < epoch]
+        self.deferred = [(asked, apply) for asked, apply in self.deferred if asked >= epoch]
+        for apply in due:
+            apply()
+
+    async def ask(self, ask: Ask) -> None:
+        """Send a rule's ask to another agent under our group; log the answer. A refusal
+        or no answer is the asked agent's to give: nothing here depends on it."""
+        group = self.mind.spec.group
+        req = AgentRequest(
+            from_agent=self.agent,
+            group=group,
+            op="add_belief" if ask.op == "ADD" else "del_belief",
+            belief=str(ask.belief),
+            epoch=max(self.mind.epoch, 0),
+        )
+        try:
+            key = keys.agent_request(keys.validate_name(ask.agent), group)
+            reply = await request(self.ctx.bus, key, req, AgentReply, timeout=ASK_TIMEOUT)
+        except (CbdiError, TimeoutError, ValueError) as exc:
+            why = str(exc) or type(exc).__name__
+            self.ctx.log.warning("ask_unanswered", agent=ask.agent, belief=req.belief, error=why)
+            return
+        log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
+        log(
+            "ask",
+            agent=ask.agent,
+            op=req.op,
+            belief=req.belief,
+            accepted=reply.accepted,
+            reason=reply.reason,
+        )
 
     async def on_state(self, key: str, req: StateRequest) -> AgentState:
         """Tell what the agent believes, desires and intends now (`cbdi ctl show`)."""
@@ -305,6 +354,8 @@ class SchedulerService:
         for event in reaction.events:
             self.ctx.log.info("desire", desire=event.desire, what=event.event, reason=event.reason)
             await publish(bus, keys.scheduler_desires(a), event, block=True)
+        for ask in reaction.asks:
+            await self.ask(ask)
         for c in reaction.commands:
             msg = self.message(c)
             if msg is None:

@@ -222,6 +222,18 @@ def load_scenario(path: Path) -> Scenario:
     return scenario
 
 
+def agent_groups(scenario: Scenario) -> dict[str, str]:
+    """Each BDI agent's group (its agent file's `group`): the run's security lets its
+    scheduler ask the others under it (docs/security.md)."""
+    out = {}
+    for agent in scenario.agents:
+        if agent.kind == "bdi" and agent.agent_file is not None:
+            group = read_agent_file(agent.agent_file, agent.name).data.get("group", "")
+            if isinstance(group, str) and group:
+                out[agent.name] = group
+    return out
+
+
 def performer_actions(scenario: Scenario) -> list[str]:
     """The actions the scenario's BDI agents leave to performers (`cbdi.performer`)."""
     found: set[str] = set()
