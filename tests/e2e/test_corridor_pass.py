@@ -1,0 +1,48 @@
+"""Two robots pass each other in a one-cell-wide corridor (issue 30), over real Zenoh,
+in virtual time and in real time: robot2 carries the only item west to the bin, robot1
+is parked in its way; blocked, robot2 asks robot1 under their group to make way, robot1
+goes into the side pocket, and the run ends done. Before robots could ask, this run
+took 92 simulated seconds in lockstep (the desire dropped at its deadline, robot1
+wandered off by chance) and did not end in real time within the 150 s limit."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from cbdi.wire import decode
+from cbdi.wire.agent import AgentReply, AgentRequest, DesireEvent
+from cbdi_monitor.reader import read_messages
+from tests_support import cbdi_up, free_port
+
+pytestmark = pytest.mark.e2e
+
+ASKED = "cbdi/trace/robot1/scheduler/rpc/request"
+
+
+@pytest.mark.timeout(240)
+@pytest.mark.parametrize(
+    "mode", [["--speed", "0"], ["--no-lockstep", "--speed", "10"]], ids=["lockstep", "real-time"]
+)
+def test_robots_in_a_corridor_ask_each_other_to_make_way(tmp_path: Path, mode: list[str]) -> None:
+    rec = tmp_path / "corridor.mcap"
+    args = ["corridor-pass", *mode, "--json", "--quiet", "--port", str(free_port())]
+    result = cbdi_up(*args, "--record", str(rec), timeout=200)
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary = json.loads(result.stdout)
+    assert summary["result"] == "done", summary["reason"]
+    assert summary["stats"]["litter_recycled"] == 1
+
+    recorded = list(read_messages(rec))
+    asks = [decode(m.payload, AgentRequest) for m in recorded if m.key == ASKED + "/request"]
+    replies = [decode(m.payload, AgentReply) for m in recorded if m.key == ASKED + "/reply"]
+    assert [(a.from_agent, a.group, a.belief) for a in asks][:1] == [
+        ("robot2", "recyclers", "(way_asked robot2)")
+    ]
+    assert replies and all(r.accepted for r in replies)
+    events = [
+        decode(m.payload, DesireEvent) for m in recorded if m.key == "cbdi/robot1/scheduler/desires"
+    ]
+    assert ("give_way", "achieved") in [(e.desire, e.event) for e in events]
