@@ -46,3 +46,17 @@ def test_robots_in_a_corridor_ask_each_other_to_make_way(tmp_path: Path, mode: l
         decode(m.payload, DesireEvent) for m in recorded if m.key == "cbdi/robot1/scheduler/desires"
     ]
     assert ("give_way", "achieved") in [(e.desire, e.event) for e in events]
+
+
+@pytest.mark.timeout(240)
+def test_asking_keeps_a_lockstep_run_the_same_whatever_the_start_order() -> None:
+    """An ask lands before the asked agent's next epoch, however late it comes: a late
+    scheduler and planner change nothing."""
+    runs = [
+        cbdi_up("corridor-pass", "--speed", "0", "--json", "--quiet", *late, timeout=200)
+        for late in ([], ["--delay", "robot1/scheduler=2", "--delay", "robot2/planner=3"])
+    ]
+    assert all(r.returncode == 0 for r in runs), runs[-1].stderr[-3000:]
+    first, again = (json.loads(r.stdout) for r in runs)
+    assert first["result"] == again["result"] == "done"
+    assert first["trace_digest"] == again["trace_digest"]
