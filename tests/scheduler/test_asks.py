@@ -14,6 +14,7 @@ from cbdi_recycling.events import seen_others
 from cbdi_recycling.maps import load_map
 from cbdi_recycling.world import AgentSpec, World
 
+import cbdi_scheduler.asking as asking
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.bus import MemoryNetwork, request
@@ -179,6 +180,22 @@ def test_a_request_is_checked_at_once_and_applied_when_asked(tmp_path: Path) -> 
     assert not serve_request(mind, stranger).accepted
 
 
+def test_held_asks_land_before_the_percepts_of_the_epoch_after_the_askers() -> None:
+    done: list[str] = []
+    held = asking.HeldAsks()
+    held.take(4, 3, lambda: done.append("early"))  # came before we handled epoch 4
+    held.take(4, 4, lambda: done.append("late"))  # came after: the same epoch anyway
+    held.take(-1, 4, lambda: done.append("operator"))  # no epoch: at once
+    held.take(2, 4, lambda: done.append("behind"))  # we are past it: at once
+    assert done == ["operator", "behind"]
+    held.release(4)
+    assert done == ["operator", "behind"]
+    held.release(5)
+    assert done == ["operator", "behind", "early", "late"]  # in the order they came
+    held.release(6)
+    assert len(done) == 4
+
+
 def test_a_request_epoch_is_bounded_on_the_wire() -> None:
     req = AgentRequest(from_agent="ann", group="team", op="add_belief", belief="(a)", epoch=-2)
     with pytest.raises(WireError):
@@ -222,15 +239,13 @@ async def test_an_ask_reaches_the_other_scheduler_and_lands_before_its_next_epoc
 
 
 async def test_an_unanswered_ask_is_logged_and_the_asker_goes_on(tmp_path: Path) -> None:
-    import cbdi_scheduler.service as scheduler_service
-
     network = MemoryNetwork()
     path = agent_file(tmp_path, ASK_RULE)
     settings = SchedulerSettings(agent="ann", agent_file=str(path), load_map=False)
     ann = Mind(load_agent(path, "ann"))
     ann.beliefs = BeliefSet.of([fact("in", "ann", "c_0_0"), fact("free", "c_0_0")])
     shell = TogetherService("ann/scheduler", settings, scheduler_main(ann, settings))
-    old, scheduler_service.ASK_TIMEOUT = scheduler_service.ASK_TIMEOUT, 0.2
+    old, asking.ASK_TIMEOUT = asking.ASK_TIMEOUT, 0.2
     task = asyncio.create_task(Together([shell], network, log_level="error").run())
     bus = network.bus()
     try:
@@ -244,7 +259,7 @@ async def test_an_unanswered_ask_is_logged_and_the_asker_goes_on(tmp_path: Path)
                 await asyncio.sleep(0.01)
         assert not task.done()
     finally:
-        scheduler_service.ASK_TIMEOUT = old
+        asking.ASK_TIMEOUT = old
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
 

@@ -8,7 +8,7 @@ planner, plans and early-arrest requests to the executor.
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from itertools import count
 
@@ -16,7 +16,7 @@ from msgspec.structs import replace
 
 from cbdi import keys
 from cbdi.beliefs import BeliefsSender
-from cbdi.bus import publish, request, sequenced_inputs, serve
+from cbdi.bus import publish, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
@@ -38,10 +38,10 @@ from cbdi.wire.agent import (
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import PERCEPTS, ActionOutcome, EpochAck, Percepts, Sensed, Tick
+from cbdi_scheduler.asking import HeldAsks, ask_request, send_ask
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
 from cbdi_scheduler.requests import prepare_request
-from cbdi_scheduler.rules import Ask
 from cbdi_scheduler.state import PlanLog, agent_state
 
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
@@ -61,7 +61,6 @@ INPUTS: tuple[type[Message], ...] = (
 
 
 MAP_WAIT = 30.0  # wall seconds between "still waiting for the world" warnings
-ASK_TIMEOUT = 2.0  # wall seconds an asked agent has to answer a rule's ask
 
 
 @dataclass(frozen=True)
@@ -88,8 +87,7 @@ class SchedulerService:
         self.beliefs_out = BeliefsSender(self.agent)  # what changed, every epoch
         self.plan_log = PlanLog()  # the executing plan's steps, for `on_state`
         self.members: list[str] = []  # the world's lockstep members (from its info)
-        # Agents' asks served but not yet applied: (the asker's epoch, the change).
-        self.deferred: list[tuple[int, Callable[[], None]]] = []
+        self.held = HeldAsks()  # other agents' asks, until the epoch after theirs
         self.lockstep = Lockstep(
             self.input_keys(),
             lambda first: ctx.start(self.epochs(first), name="epochs"),
@@ -155,7 +153,7 @@ class SchedulerService:
         if isinstance(msg, EpochAck | Tick):
             return
         if isinstance(msg, PERCEPTS):
-            self.apply_asked(msg.epoch)
+            self.held.release(msg.epoch)
         reaction = self.react(msg)
         if isinstance(msg, PERCEPTS):  # beliefs first: the planner plans from them
             update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
@@ -255,9 +253,7 @@ class SchedulerService:
 
         Asked on `.../rpc/request/<group>` (the router lets only that group's identities
         ask there), the group is the key's: a request naming another is refused. An
-        agent's ask (it names its epoch) changes the mind before the percepts of the
-        epoch after it, whenever it came: in lockstep the asker waits for the answer
-        before it acknowledges its epoch, so the change lands in the same epoch every run.
+        agent's ask (it names its epoch) is held until our next epoch (`asking`).
         """
         group = keys.request_group(key)
         if group and group != req.group:
@@ -266,10 +262,8 @@ class SchedulerService:
         else:
             served = prepare_request(self.mind, req)
             reply = served.reply
-            if served.apply is not None and req.epoch >= 0 and req.epoch >= self.mind.epoch:
-                self.deferred.append((req.epoch, served.apply))
-            elif served.apply is not None:
-                served.apply()
+            if served.apply is not None:
+                self.held.take(req.epoch, self.mind.epoch, served.apply)
         log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
         log(
             "agent_request",
@@ -280,41 +274,6 @@ class SchedulerService:
             reason=reply.reason,
         )
         return reply
-
-    def apply_asked(self, epoch: int) -> None:
-        """Apply the asks of epochs before `epoch`, in the order they came."""
-        due = [apply for asked, apply in self.deferred if asked < epoch]
-        self.deferred = [(asked, apply) for asked, apply in self.deferred if asked >= epoch]
-        for apply in due:
-            apply()
-
-    async def ask(self, ask: Ask) -> None:
-        """Send a rule's ask to another agent under our group; log the answer. A refusal
-        or no answer is the asked agent's to give: nothing here depends on it."""
-        group = self.mind.spec.group
-        req = AgentRequest(
-            from_agent=self.agent,
-            group=group,
-            op="add_belief" if ask.op == "ADD" else "del_belief",
-            belief=str(ask.belief),
-            epoch=max(self.mind.epoch, 0),
-        )
-        try:
-            key = keys.agent_request(keys.validate_name(ask.agent), group)
-            reply = await request(self.ctx.bus, key, req, AgentReply, timeout=ASK_TIMEOUT)
-        except (CbdiError, TimeoutError, ValueError) as exc:
-            why = str(exc) or type(exc).__name__
-            self.ctx.log.warning("ask_unanswered", agent=ask.agent, belief=req.belief, error=why)
-            return
-        log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
-        log(
-            "ask",
-            agent=ask.agent,
-            op=req.op,
-            belief=req.belief,
-            accepted=reply.accepted,
-            reason=reply.reason,
-        )
 
     async def on_state(self, key: str, req: StateRequest) -> AgentState:
         """Tell what the agent believes, desires and intends now (`cbdi ctl show`)."""
@@ -355,7 +314,8 @@ class SchedulerService:
             self.ctx.log.info("desire", desire=event.desire, what=event.event, reason=event.reason)
             await publish(bus, keys.scheduler_desires(a), event, block=True)
         for ask in reaction.asks:
-            await self.ask(ask)
+            req = ask_request(a, self.mind.spec.group, ask, self.mind.epoch)
+            await send_ask(bus, self.ctx.log, req, ask.agent)
         for c in reaction.commands:
             msg = self.message(c)
             if msg is None:

@@ -196,7 +196,11 @@ def _secured(service: str, scenario: Scenario, hub: bool) -> dict[str, str]:
         env |= {"CBDI_USERS": str(inside.users), "CBDI_ACL": str(inside.acl)}
         if hub:
             env["CBDI_ZENOH_CONFIG"] = str(inside.hub)
-        agents = ",".join(f"{a.name}:{a.kind}" for a in scenario.agents)
+        groups = agent_groups(scenario)
+        agents = ",".join(
+            f"{a.name}:{a.kind}" + (f":{groups[a.name]}" if a.name in groups else "")
+            for a in scenario.agents
+        )
         env |= {"CBDI_SECRETS_DIR": SECRETS_IN_CONTAINER, "CBDI_SECRETS_AGENTS": agents}
     return env
 
