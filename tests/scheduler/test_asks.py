@@ -345,3 +345,14 @@ def test_a_scheduler_may_ask_under_its_own_group_only() -> None:
         claimed = {g.identity: g for g in grants(agents, {"robot1": reserved})}
         assert not claimed["robot1/scheduler"].groups
         assert keys.agent_request("*", reserved) not in claimed["robot1/scheduler"].query
+
+
+def test_only_an_agent_file_that_asks_gets_its_group_granted() -> None:
+    from cbdi.launcher.scenario import agent_groups, find_scenario, load_scenario
+
+    corridor_pass = load_scenario(
+        find_scenario(str(REPO / "domains/recycling/scenarios/corridor-pass.toml"))
+    )
+    assert agent_groups(corridor_pass) == {"robot1": "recyclers", "robot2": "recyclers"}
+    courier = load_scenario(find_scenario(str(REPO / "domains/courier/scenarios/courier.toml")))
+    assert agent_groups(courier) == {}  # the courier's file has a group but never asks
