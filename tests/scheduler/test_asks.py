@@ -10,7 +10,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from cbdi_recycling.events import seen_others
+from cbdi_recycling.events import OBSTACLE_MEMORY, believe_others, seen_others
+from cbdi_recycling.knowledge import RecyclingKnowledge
 from cbdi_recycling.maps import load_map
 from cbdi_recycling.world import AgentSpec, World
 
@@ -33,7 +34,7 @@ from cbdi_scheduler.service import SchedulerSettings, scheduler_main
 from tests_support import REPO
 
 AGENT = REPO / "domains/recycling/agents/recycler.toml"
-CORRIDOR = REPO / "domains/recycling/maps/corridor-pass-10x3.toml"
+CORRIDOR = REPO / "domains/recycling/maps/corridor-pass-8x3.toml"
 DOMAIN = REPO / "domains/recycling/pddl/domain.pddl"
 WAY_ASKED = fact("way_asked", "robot2")
 
@@ -265,14 +266,22 @@ async def test_an_unanswered_ask_is_logged_and_the_asker_goes_on(tmp_path: Path)
 
 
 # -- the recycler on the corridor --------------------------------------------------------
-def test_the_recycling_knowledge_believes_which_robot_stands_where() -> None:
+def test_the_recycling_knowledge_believes_which_robot_it_saw_where_for_a_while() -> None:
     world = corridor((2, 1), (3, 1))
     p = world.percepts("robot2")
     assert p.others == [AgentSeen(name="robot1", cell=(2, 1))]
-    beliefs = seen_others(BeliefSet.of([fact("other_in", "robot3", "c_5_5")]), p)
+    seen = seen_others({"robot3": ("c_5_5", -OBSTACLE_MEMORY)}, p)
+    assert seen == {"robot1": ("c_2_1", 0.0)}  # robot3, unseen for 8 s, is forgotten
+    beliefs = believe_others(BeliefSet.of([fact("other_in", "robot3", "c_5_5")]), seen)
     assert sorted(beliefs.facts_of("other_in")) == [("other_in", "robot1", "c_2_1")]
-    far = corridor((2, 1), (6, 1))
+    far = corridor((2, 1), (5, 1))
     assert far.percepts("robot2").others == []
+    knowledge = RecyclingKnowledge("robot2")
+    knowledge.on_percepts(BeliefSet.of([]), p)
+    later = at(far, "robot2", 7)  # robot1 out of sight: still believed where last seen
+    assert knowledge.on_percepts(BeliefSet.of([]), later).holds(fact("other_in", "robot1", "c_2_1"))
+    gone = at(far, "robot2", 8)
+    assert not knowledge.on_percepts(BeliefSet.of([]), gone).facts_of("other_in")
 
 
 def test_a_stalled_robot_asks_the_robot_it_sees_once_and_does_not_step_aside() -> None:
