@@ -1,6 +1,7 @@
 """The authenticated, access-controlled bus (real Zenoh, real processes): a client without
 credentials, or with wrong ones, cannot connect; one with robot2's credentials cannot
-move robot1, add a desire to it, finish the run or read robot1's keys; each refusal is
+move robot1, add a desire to it (but as robot2's scheduler, under their group, which
+its agent file asks under), finish the run or read robot1's keys; each refusal is
 logged (by the router, or the world); and the run still ends as it should."""
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from cbdi.bus import BusConfig, ZenohBus, open_bus, publish, request
 from cbdi.errors import ConfigError, RequestFailedError, RequestTimeoutError
 from cbdi.security import read_credentials
 from cbdi.wire import encode
-from cbdi.wire.agent import AgentRequest, StateRequest
+from cbdi.wire.agent import AgentReply, AgentRequest, StateRequest
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import ActionReply, ActionRequest
 from tests_support import BIN, Proc, free_port, wait_for
@@ -84,9 +85,16 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
             goal=["(in robot1 c_0_6)"],
         )
         out["desire"] = [
-            await _refused(scheduler, keys.agent_request("robot1", group), encode(desire))
-            for group in ("recyclers", "operator")
+            await _refused(executor, keys.agent_request("robot1", "recyclers"), encode(desire)),
+            await _refused(scheduler, keys.agent_request("robot1", "operator"), encode(desire)),
         ]
+        # Its scheduler asks robot1 under their group (the recycler's `ask_way`): that is
+        # served, as robot1's allowed_groups say.
+        check = AgentRequest(
+            from_agent="robot2", group="recyclers", op="check_belief", belief="(map_loaded)"
+        )
+        key = keys.agent_request("robot1", "recyclers")
+        out["group_ask"] = (await request(scheduler, key, check, AgentReply, timeout=5.0)).holds
         # The router's admin space (a session answers `@/**` of its own too).
         out["admin"] = await _refused(scheduler, "@/*/router/**", b"")
         out["state"] = await _refused(
@@ -159,6 +167,7 @@ def test_a_rogue_client_is_refused_and_the_run_goes_on(tmp_path: Path) -> None:
     assert attack["act_robot1"] == "timeout"
     assert attack["act_own_key"] == "not_own_agent"
     assert attack["desire"] == ["timeout", "timeout"]
+    assert attack["group_ask"] is True
     assert attack["state"] == attack["admin"] == "timeout"
     assert attack["read"] == [], attack["read"]
     assert attack["ticks"], "robot2's credentials still read the clock"
@@ -167,7 +176,8 @@ def test_a_rogue_client_is_refused_and_the_run_goes_on(tmp_path: Path) -> None:
     # Each refusal is in the router's log (the world's, for an action on the wrong key).
     assert "event=auth_refused" in log
     assert _denied(log, "robot2.executor", "query", keys.world_act("robot1"))
-    assert _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "recyclers"))
+    assert _denied(log, "robot2.executor", "query", keys.agent_request("robot1", "recyclers"))
+    assert not _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "recyclers"))
     assert _denied(log, "robot2.scheduler", "query", keys.agent_request("robot1", "operator"))
     assert _denied(log, "robot2.scheduler", "put", keys.EVENTS)
     assert _denied(log, "robot2.scheduler", "query", "@/*/router/**")

@@ -83,7 +83,8 @@ def test_every_service_logs_in_with_its_own_credentials_mounted_read_only() -> N
     assert text.count('"./secrets:/secrets:ro"') == text.count("    image: ") - 1
     router = text[text.index("  router:") : text.index("  monitor:")]
     assert '"./secrets:/secrets"' in router and "CBDI_SECRETS_DIR: /secrets" in router
-    assert 'CBDI_SECRETS_AGENTS: "robot1:bdi,robot2:bdi"' in router
+    # With each agent's group: its scheduler may ask the others under it (a rule's ask).
+    assert 'CBDI_SECRETS_AGENTS: "robot1:bdi:recyclers,robot2:bdi:recyclers"' in router
     assert "CBDI_CREDENTIALS" not in compose_file(_scenario(), ComposeOptions(secrets=""))
 
 
@@ -188,3 +189,7 @@ def test_the_router_makes_the_secrets_every_service_names_when_missing(tmp_path:
     assert not make_secrets(settings) and (where / "router" / "acl.json").read_text() == acl
     with pytest.raises(ConfigError, match="NAME:KIND"):
         make_secrets(RouterSettings(secrets_dir=str(where), secrets_agents=("robot1",)))
+    grouped = tmp_path / "grouped"
+    make_secrets(RouterSettings(secrets_dir=str(grouped), secrets_agents=("robot1:bdi:team",)))
+    acl = (grouped / "router" / "acl.json").read_text()
+    assert "cbdi/*/scheduler/rpc/request/team" in acl

@@ -44,7 +44,8 @@ class RouterSettings(ServiceSettings):
         },
     )
     secrets_agents: tuple[str, ...] = field(
-        default=(), metadata={"help": "the run's agents, NAME:KIND, for --secrets-dir"}
+        default=(),
+        metadata={"help": "the run's agents, NAME:KIND[:GROUP], for --secrets-dir"},
     )
 
     def bus_config(self) -> BusConfig:
@@ -87,17 +88,22 @@ async def _router(ctx: ServiceContext) -> None:
 
 def make_secrets(settings: RouterSettings) -> bool:
     """Make the run's secrets in `secrets_dir` unless it holds them; return whether it
-    wrote them. ConfigError: a bad NAME:KIND."""
+    wrote them. ConfigError: a bad NAME:KIND[:GROUP] (GROUP: the agent file's, under
+    which its scheduler may ask the others)."""
     from cbdi.launcher.compose import compose_grants  # the run's identities
 
-    agents = []
+    agents, groups = [], {}
     for entry in settings.secrets_agents:
-        name, _, kind = entry.partition(":")
+        name, _, rest = entry.partition(":")
+        kind, _, group = rest.partition(":")
         if kind not in AGENT_KINDS or not name:
             known = ", ".join(AGENT_KINDS)
-            raise ConfigError("--secrets-agents", entry, f"expected NAME:KIND, KIND one of {known}")
+            why = f"expected NAME:KIND[:GROUP], KIND one of {known}"
+            raise ConfigError("--secrets-agents", entry, why)
         agents.append((name, kind))
-    return ensure_secrets(Path(settings.secrets_dir), compose_grants(agents))
+        if group:
+            groups[name] = group
+    return ensure_secrets(Path(settings.secrets_dir), compose_grants(agents, groups))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

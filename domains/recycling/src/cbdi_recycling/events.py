@@ -22,6 +22,7 @@ __all__ = [
     "OBSTACLE_MEMORY",
     "UNKNOWN_DISTANCE",
     "Distances",
+    "believe_others",
     "cell_name",
     "distance",
     "exploration_target",
@@ -29,6 +30,7 @@ __all__ = [
     "revise_from_outcome",
     "revise_from_percepts",
     "seen_blocked",
+    "seen_others",
 ]
 
 
@@ -95,6 +97,31 @@ def revise_from_percepts(
         fresh += [instance(held, litter_type), fact("holding", me, held)]
     fresh.append(fluent("loaded_amount", me, value=float(len(p.holding))))
     return beliefs.removing(stale).adding(fresh)
+
+
+def seen_others(
+    memory: dict[str, tuple[str, float]], p: Percepts, keep: float = OBSTACLE_MEMORY
+) -> dict[str, tuple[str, float]]:
+    """Return where and when each other agent was last seen, with this epoch's percepts,
+    leaving out those not seen for `keep` seconds: a robot that made way one cell back
+    is out of a depth-1 sight at once, and one forgotten then walked back into the way."""
+    out = {a: (c, t) for a, (c, t) in memory.items() if p.time - t < keep}
+    for o in p.others:
+        out[o.name] = (cell_name(o.cell), p.time)
+    return out
+
+
+def believe_others(beliefs: BeliefSet, others: dict[str, tuple[str, float]]) -> BeliefSet:
+    """Return `beliefs` with `(other_in AGENT CELL)` for each agent seen lately (where it
+    was last seen, `seen_others`) and for no other: which robot may stand in the way, so
+    that a robot held up by another can ask it to make way (the recycler's `ask_way`)."""
+    have = set(beliefs.facts_of("other_in"))
+    want = {("other_in", a, c) for a, (c, _) in others.items()}
+    if have == want:
+        return beliefs
+    return beliefs.removing(fact(*f) for f in have - want).adding(
+        fact(*f) for f in sorted(want - have)
+    )
 
 
 def revise_from_outcome(beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:

@@ -1,8 +1,9 @@
 """The recycling robots' domain knowledge for the scheduler (`cbdi_scheduler.knowledge`).
 
 Percepts become beliefs as `events` says (cells seen free or blocked, litter seen,
-what the robot holds), with obstacles out of sight remembered a while; a claim on a
-litter item costs the believed path length to it (`events.Distances`, each search kept).
+what the robot holds, which other robots it saw where: `other_in`), with obstacles and
+robots out of sight remembered a while; a claim on a litter item costs the believed
+path length to it (`events.Distances`, each search kept).
 Exploration: the robot remembers every cell it has sensed. Once it has stood still for
 `EXPLORE_AFTER` seconds with nothing in hand, and from then until it picks something up,
 it believes `(explore_target CELL)`, the nearest cell it never sensed (kept until
@@ -17,12 +18,14 @@ from cbdi.beliefs import Belief, BeliefSet, fact
 from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
 from cbdi_recycling.events import (
     Distances,
+    believe_others,
     cell_name,
     exploration_target,
     map_beliefs,
     revise_from_outcome,
     revise_from_percepts,
     seen_blocked,
+    seen_others,
 )
 
 __all__ = ["EXPLORE_AFTER", "RecyclingKnowledge"]
@@ -37,6 +40,7 @@ class RecyclingKnowledge:
         self.agent = agent
         self.distances = Distances()
         self.blocked: dict[str, float] = {}  # cell -> when last seen blocked
+        self.others: dict[str, tuple[str, float]] = {}  # agent -> (cell, when) last seen
         self.sensed: set[str] = set()  # every cell sensed so far
         self.target: str | None = None  # where exploring goes next
         self.at: tuple[str, float] = ("", 0.0)  # the robot's cell, and since when
@@ -48,6 +52,8 @@ class RecyclingKnowledge:
     def on_percepts(self, beliefs: BeliefSet, percepts: Percepts) -> BeliefSet:
         self.blocked = seen_blocked(self.blocked, percepts)
         revised = revise_from_percepts(beliefs, percepts, blocked=self.blocked)
+        self.others = seen_others(self.others, percepts)
+        revised = believe_others(revised, self.others)
         here = cell_name(percepts.position)
         self.sensed |= {cell_name(c) for c in (*percepts.free, *percepts.blocked)} | {here}
         if here != self.at[0]:

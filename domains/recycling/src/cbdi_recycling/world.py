@@ -18,6 +18,7 @@ from cbdi.wire.world import (
     ActionOutcome,
     ActionReply,
     ActionRequest,
+    AgentSeen,
     AgentStats,
     AgentView,
     BinView,
@@ -324,6 +325,11 @@ class World:
             for n, c in self.litter.items()
             if abs(c[0] - ax) <= d and abs(c[1] - ay) <= d
         ]
+        others = [
+            AgentSeen(name=n, cell=a.cell)
+            for n, a in sorted(self.agents.items())
+            if n != name and abs(a.cell[0] - ax) <= d and abs(a.cell[1] - ay) <= d
+        ]
         return Percepts(
             agent=name,
             epoch=self.epoch,
@@ -334,6 +340,7 @@ class World:
             blocked=blocked,
             items=seen,
             holding=list(agent.holding),
+            others=others,
         )
 
     def snapshot(self) -> WorldSnapshot:

@@ -22,7 +22,8 @@ from cbdi.agentfile import (
     parse_agent_text,
     read_agent_file,
 )
-from cbdi.beliefs import INSTANCE, Belief
+from cbdi.beliefs import INSTANCE, PREDICATE, Belief
+from cbdi.keys import validate_name
 from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
 from cbdi_scheduler.knowledge import available
@@ -289,8 +290,12 @@ class _Reader:
     def effect(self, raw: Any, where: str) -> RuleEffect:
         e = self.check(raw, dict, where)
         if len(e) != 1:
-            raise self.fail(where, "one of add_belief, del_belief, add_desire, del_desire, boost")
+            raise self.fail(
+                where, "one of add_belief, del_belief, add_desire, del_desire, boost, ask"
+            )
         ((kind, value),) = e.items()
+        if kind == "ask":
+            return self.ask(value, f"{where}.ask")
         if kind in ("add_belief", "del_belief"):
             op = "ADD" if kind == "add_belief" else "DEL"
             return RuleEffect("belief", op, belief=self.belief(value, f"{where}.{kind}"))
@@ -301,6 +306,32 @@ class _Reader:
             name = self.check(value, str, f"{where}.del_desire")
             return RuleEffect("desire", "DEL", desire=Desire(name=name, goal=()))
         raise self.fail(where, f"unknown effect {kind!r}")
+
+    def ask(self, raw: Any, where: str) -> RuleEffect:
+        """An `ask = { agent = "{r}", add_belief = "(...)" }` effect (or `del_belief`):
+        the file must name its group, which the request goes under."""
+        a = self.check(raw, dict, where)
+        if not self.opt(self.data, "group", str, ""):
+            raise self.fail(where, "an ask goes under the agent's group: set `group`")
+        agent = self.get(a, "agent", str, f"{where}.agent")
+        if not _PLACEHOLDER.search(agent):
+            try:
+                validate_name(agent)
+            except ValueError as exc:
+                raise self.fail(f"{where}.agent", str(exc)) from None
+        ops = [k for k in ("add_belief", "del_belief") if k in a]
+        unknown = sorted(set(a) - {"agent", "add_belief", "del_belief"})
+        if len(ops) != 1 or unknown:
+            why = f"unknown key {unknown[0]!r}: " if unknown else ""
+            raise self.fail(where, why + "an ask needs `agent` and one of add_belief, del_belief")
+        belief = self.belief(a[ops[0]], f"{where}.{ops[0]}")
+        if belief.kind != PREDICATE:
+            raise self.fail(f"{where}.{ops[0]}", "an ask adds or deletes a predicate fact")
+        op = "ADD" if ops[0] == "add_belief" else "DEL"
+        return RuleEffect("ask", op, belief=belief, agent=agent)
+
+
+_PLACEHOLDER = re.compile(r"\{\w+\}")
 
 
 _JOINT = re.compile(r"[A-Za-z][A-Za-z0-9_\-]{0,62}")

@@ -18,7 +18,7 @@ from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, Drop, achieved, drops, joint, select_desire
 from cbdi_scheduler.intentions import Command, Intention, IntentionScheduler
 from cbdi_scheduler.knowledge import DomainKnowledge, load_knowledge
-from cbdi_scheduler.rules import fire_rules
+from cbdi_scheduler.rules import Ask, fire_rules
 
 __all__ = ["Mind", "Reaction"]
 
@@ -31,6 +31,7 @@ class Reaction:
     events: list[DesireEvent] = field(default_factory=list)
     beliefs_changed: bool = False
     claims: list[Claim] = field(default_factory=list)  # to tell the group
+    asks: list[Ask] = field(default_factory=list)  # to send to other agents of the group
 
 
 class Mind:
@@ -60,6 +61,7 @@ class Mind:
         # The beliefs changed between cycles (an outcome, a sensor, an operator): the next
         # cycle counts it as a change, so a failed search waiting for one is retried.
         self.changed = False
+        self.asking: frozenset[Ask] = frozenset()  # the asks the rules made last time
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -160,6 +162,9 @@ class Mind:
         self.beliefs, self.desires = fired.beliefs, desires
         out.events += [self.event(d, "added") for d in added]
         out.events += [self.event(self.desires[n], "boosted") for n in boosted]
+        # An ask goes once, when its rule starts to match: not again while it matches.
+        out.asks += [a for a in fired.asks if a not in self.asking and a.agent != self.agent]
+        self.asking = frozenset(fired.asks)
 
     def _unclaimed(self, desires: dict[str, Desire]) -> dict[str, Desire]:
         """Leave out what rules just added to our desires that another agent owns."""

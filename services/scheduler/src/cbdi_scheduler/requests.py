@@ -7,7 +7,9 @@ predicate the domain lacks is refused, naming it); `{self}` stands for the agent
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
 
 from cbdi.beliefs import Belief
 from cbdi.wire.agent import AgentReply, AgentRequest
@@ -17,7 +19,7 @@ from cbdi_scheduler.desires import NO_DEADLINE, Desire
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
 from cbdi_scheduler.mind import Mind
 
-__all__ = ["OPS", "serve_request"]
+__all__ = ["OPS", "Served", "prepare_request", "serve_request"]
 
 OPS = (
     "check_belief",
@@ -35,40 +37,61 @@ class _Refused(Exception):
     """A request that cannot be served; the message is the reason."""
 
 
+@dataclass(frozen=True)
+class Served:
+    """A checked request: the reply, and what it changes in the mind (None: nothing,
+    a check or a refusal), to apply now or, for an agent's ask, at its epoch's end."""
+
+    reply: AgentReply
+    apply: Callable[[], None] | None = None
+
+
 def serve_request(mind: Mind, req: AgentRequest) -> AgentReply:
-    """Serve one request against `mind`, or refuse it with the reason."""
+    """Serve one request against `mind` now, or refuse it with the reason."""
+    served = prepare_request(mind, req)
+    if served.apply is not None:
+        served.apply()
+    return served.reply
+
+
+def prepare_request(mind: Mind, req: AgentRequest) -> Served:
+    """Check one request against `mind`: the reply, and the change it asks for."""
     if req.group not in mind.spec.allowed_groups:
-        return AgentReply(accepted=False, reason=f"group {req.group!r} is not allowed")
+        return Served(AgentReply(accepted=False, reason=f"group {req.group!r} is not allowed"))
     if req.op not in OPS:
-        return AgentReply(accepted=False, reason=f"unknown op {req.op!r} (known: {', '.join(OPS)})")
+        why = f"unknown op {req.op!r} (known: {', '.join(OPS)})"
+        return Served(AgentReply(accepted=False, reason=why))
     try:
         return _serve(mind, req)
     except _Refused as exc:
-        return AgentReply(accepted=False, reason=str(exc))
+        return Served(AgentReply(accepted=False, reason=str(exc)))
 
 
-def _serve(mind: Mind, req: AgentRequest) -> AgentReply:
+def _serve(mind: Mind, req: AgentRequest) -> Served:
     if req.op in ("halt", "resume"):
         stop = req.op == "halt"
         if not stop and not mind.intentions.halted and not mind.stop_asked:
             raise _Refused("not halted: nothing to resume")
-        mind.request_stop(stop)
-        return AgentReply(accepted=True, holds=stop)
+        return Served(AgentReply(accepted=True, holds=stop), partial(mind.request_stop, stop))
     if req.op == "check_desire":
-        return AgentReply(accepted=True, holds=req.desire in mind.desires)
+        return Served(AgentReply(accepted=True, holds=req.desire in mind.desires))
     if req.op == "del_desire":
         if req.desire not in mind.desires:
             held = ", ".join(sorted(mind.desires)) or "none"
             raise _Refused(f"no desire {req.desire!r} is held (held: {held})")
-        mind.withdraw(req.desire, f"removed by {req.from_agent}")
-        return AgentReply(accepted=True, holds=True)
+        why = f"removed by {req.from_agent}"
+        return Served(
+            AgentReply(accepted=True, holds=True), partial(mind.withdraw, req.desire, why)
+        )
     if req.op != "add_desire":
         belief = _belief(mind, req.belief, "belief")
         if req.op == "check_belief":
-            return AgentReply(accepted=True, holds=mind.beliefs.holds(belief))
+            return Served(AgentReply(accepted=True, holds=mind.beliefs.holds(belief)))
         adding = req.op == "add_belief"
-        mind.request_beliefs([belief] if adding else [], [] if adding else [belief])
-        return AgentReply(accepted=True, holds=adding)
+        change = partial(
+            mind.request_beliefs, [belief] if adding else [], [] if adding else [belief]
+        )
+        return Served(AgentReply(accepted=True, holds=adding), change)
     if not req.desire or not req.goal:
         raise _Refused("add_desire needs a desire name and a goal")
     if req.desire in mind.desires:
@@ -83,8 +106,11 @@ def _serve(mind: Mind, req: AgentRequest) -> AgentReply:
         precondition=_condition(mind, req.precondition, "precondition"),
         context=_condition(mind, req.context, "context"),
     )
-    mind.request_desire(desire.due(mind.now))
-    return AgentReply(accepted=True, holds=True)
+    return Served(AgentReply(accepted=True, holds=True), partial(_add_desire, mind, desire))
+
+
+def _add_desire(mind: Mind, desire: Desire) -> None:
+    mind.request_desire(desire.due(mind.now))  # its deadline runs from when it is held
 
 
 def _text(mind: Mind, text: str) -> str:

@@ -4,6 +4,8 @@ Each rule fires once for every binding of its condition's placeholders; its effe
 or delete beliefs, add or delete desires, or BOOST a desire (extend its goal with the
 given literals; the desire is added if the agent does not hold it yet). This is how the
 paper's agent reacts to sensing a new object: its goal atom joins the current goal.
+An ASK effect asks another agent of the group to add or delete a belief of its own
+(`Ask`; the mind sends each once, when its rule starts to match).
 """
 
 from __future__ import annotations
@@ -12,32 +14,50 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from cbdi.beliefs import Belief, BeliefSet
-from cbdi_scheduler.conditions import Binding, Condition, bindings, substitute_belief
+from cbdi_scheduler.conditions import Binding, Condition, bindings, substitute, substitute_belief
 from cbdi_scheduler.desires import Desire, boosted
 
-__all__ = ["OPERATIONS", "ReactiveRule", "RuleEffect", "RulesOutcome", "fire_rules"]
+__all__ = ["OPERATIONS", "Ask", "ReactiveRule", "RuleEffect", "RulesOutcome", "fire_rules"]
 
 OPERATIONS = ("ADD", "DEL", "BOOST")
+TARGETS = ("belief", "desire", "ask")
+
+
+@dataclass(frozen=True)
+class Ask:
+    """A request a rule makes of another agent: add (`ADD`) or delete (`DEL`) `belief` in
+    `agent`'s beliefs; its own rules decide what follows."""
+
+    agent: str
+    op: str
+    belief: Belief
 
 
 @dataclass(frozen=True)
 class RuleEffect:
-    """One effect: `target` belief or desire, `op` ADD, DEL or BOOST (desires only)."""
+    """One effect: `target` belief, desire or ask, `op` ADD, DEL or BOOST (desires only).
+
+    An ask names the agent asked in `agent` (a name or a placeholder) and the belief it
+    is asked to add or delete.
+    """
 
     target: str
     op: str
     belief: Belief | None = None
     desire: Desire | None = None
+    agent: str = ""
 
     def __post_init__(self) -> None:
         if self.op not in OPERATIONS:
             raise ValueError(f"unknown operation {self.op!r} (known: {', '.join(OPERATIONS)})")
-        if self.target == "belief" and (self.belief is None or self.op == "BOOST"):
-            raise ValueError("a belief effect needs a belief and ADD or DEL")
+        if self.target not in TARGETS:
+            raise ValueError(f"effect target must be one of {', '.join(TARGETS)}: {self.target!r}")
+        if self.target != "desire" and (self.belief is None or self.op == "BOOST"):
+            raise ValueError(f"a {self.target} effect needs a belief and ADD or DEL")
         if self.target == "desire" and self.desire is None:
             raise ValueError("a desire effect needs a desire")
-        if self.target not in ("belief", "desire"):
-            raise ValueError(f"effect target must be belief or desire, got {self.target!r}")
+        if self.target == "ask" and not self.agent:
+            raise ValueError("an ask effect needs the agent asked")
 
 
 @dataclass(frozen=True)
@@ -57,6 +77,7 @@ class RulesOutcome:
     desires: dict[str, Desire]
     fired: list[str] = field(default_factory=list)
     boosted: list[str] = field(default_factory=list)
+    asks: list[Ask] = field(default_factory=list)  # in rule order, each once
 
 
 def fire_rules(
@@ -79,6 +100,13 @@ def _show(binding: Binding) -> str:
 
 
 def _apply(effect: RuleEffect, binding: Binding, out: RulesOutcome, now: float) -> None:
+    if effect.target == "ask":
+        assert effect.belief is not None
+        belief = substitute_belief(effect.belief, binding)
+        ask = Ask(substitute(effect.agent, binding), effect.op, belief)
+        if ask not in out.asks:
+            out.asks.append(ask)
+        return
     if effect.target == "belief":
         assert effect.belief is not None
         b = substitute_belief(effect.belief, binding)

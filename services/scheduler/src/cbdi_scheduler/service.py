@@ -38,9 +38,10 @@ from cbdi.wire.agent import (
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi.wire.world import PERCEPTS, ActionOutcome, EpochAck, Percepts, Sensed, Tick
+from cbdi_scheduler.asking import HeldAsks, ask_request, send_ask
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
-from cbdi_scheduler.requests import serve_request
+from cbdi_scheduler.requests import prepare_request
 from cbdi_scheduler.state import PlanLog, agent_state
 
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
@@ -86,6 +87,7 @@ class SchedulerService:
         self.beliefs_out = BeliefsSender(self.agent)  # what changed, every epoch
         self.plan_log = PlanLog()  # the executing plan's steps, for `on_state`
         self.members: list[str] = []  # the world's lockstep members (from its info)
+        self.held = HeldAsks()  # other agents' asks, until the epoch after theirs
         self.lockstep = Lockstep(
             self.input_keys(),
             lambda first: ctx.start(self.epochs(first), name="epochs"),
@@ -150,6 +152,8 @@ class SchedulerService:
         """React to one input and publish what follows (beliefs first after percepts)."""
         if isinstance(msg, EpochAck | Tick):
             return
+        if isinstance(msg, PERCEPTS):
+            self.held.release(msg.epoch)
         reaction = self.react(msg)
         if isinstance(msg, PERCEPTS):  # beliefs first: the planner plans from them
             update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
@@ -248,14 +252,18 @@ class SchedulerService:
         """Serve another agent's request (the next cycle reacts to what it changed).
 
         Asked on `.../rpc/request/<group>` (the router lets only that group's identities
-        ask there), the group is the key's: a request naming another is refused.
+        ask there), the group is the key's: a request naming another is refused. An
+        agent's ask (it names its epoch) is held until our next epoch (`asking`).
         """
         group = keys.request_group(key)
         if group and group != req.group:
             why = f"group {req.group!r} named, but asked under {group!r} (the key {key})"
             reply = AgentReply(accepted=False, reason=why)
         else:
-            reply = serve_request(self.mind, req)
+            served = prepare_request(self.mind, req)
+            reply = served.reply
+            if served.apply is not None:
+                self.held.take(req.epoch, self.mind.epoch, served.apply)
         log = self.ctx.log.info if reply.accepted else self.ctx.log.warning
         log(
             "agent_request",
@@ -305,6 +313,9 @@ class SchedulerService:
         for event in reaction.events:
             self.ctx.log.info("desire", desire=event.desire, what=event.event, reason=event.reason)
             await publish(bus, keys.scheduler_desires(a), event, block=True)
+        for ask in reaction.asks:
+            req = ask_request(a, self.mind.spec.group, ask, self.mind.epoch)
+            await send_ask(bus, self.ctx.log, req, ask.agent)
         for c in reaction.commands:
             msg = self.message(c)
             if msg is None:

@@ -21,14 +21,14 @@ import json
 import os
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from cbdi.errors import ConfigError
 from cbdi.launcher.cli import scenario_arguments, scenario_from_args
-from cbdi.launcher.scenario import AGENT_KINDS, Scenario
+from cbdi.launcher.scenario import AGENT_KINDS, Scenario, agent_groups
 from cbdi.launcher.services import ServicePlan, agent_of, plan_services
 from cbdi.runtime.fault import FAULT_ENV, parse_faults
 from cbdi.runtime.life import LIFE_ENV
@@ -196,22 +196,29 @@ def _secured(service: str, scenario: Scenario, hub: bool) -> dict[str, str]:
         env |= {"CBDI_USERS": str(inside.users), "CBDI_ACL": str(inside.acl)}
         if hub:
             env["CBDI_ZENOH_CONFIG"] = str(inside.hub)
-        agents = ",".join(f"{a.name}:{a.kind}" for a in scenario.agents)
+        groups = agent_groups(scenario)
+        agents = ",".join(
+            f"{a.name}:{a.kind}" + (f":{groups[a.name]}" if a.name in groups else "")
+            for a in scenario.agents
+        )
         env |= {"CBDI_SECRETS_DIR": SECRETS_IN_CONTAINER, "CBDI_SECRETS_AGENTS": agents}
     return env
 
 
-def compose_grants(agents: Sequence[tuple[str, str]]) -> list[Grant]:
+def compose_grants(
+    agents: Sequence[tuple[str, str]], groups: Mapping[str, str] | None = None
+) -> list[Grant]:
     """Return every identity of a compose run of `agents` (name, kind): `cbdi up`'s,
-    `wait`'s and the routers'."""
+    `wait`'s and the routers'; `groups` as `grants` takes them."""
     components = [(name, AGENT_KINDS[kind]) for name, kind in agents]
-    return [*grants(components), *COMPOSE_GRANTS]
+    return [*grants(components, groups), *COMPOSE_GRANTS]
 
 
 def write_secrets(scenario: Scenario, where: Path) -> bool:
     """Write the run's secrets in `where`, unless it holds every identity's already (the
     projects of a run split over hosts share one set); return whether it wrote them."""
-    return ensure_secrets(where, compose_grants([(a.name, a.kind) for a in scenario.agents]))
+    agents = [(a.name, a.kind) for a in scenario.agents]
+    return ensure_secrets(where, compose_grants(agents, agent_groups(scenario)))
 
 
 def secrets_beside(secrets: str, output: str) -> Path:

@@ -38,7 +38,7 @@ from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
 from cbdi.launcher.ports import free_port
 from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
-from cbdi.launcher.scenario import AGENT_KINDS, Scenario
+from cbdi.launcher.scenario import AGENT_KINDS, Scenario, agent_groups
 from cbdi.launcher.services import plan_services
 from cbdi.launcher.specs import run_specs
 from cbdi.launcher.summary import RunSummary, collect_stats, count_actions, count_plans, settle
@@ -134,7 +134,7 @@ async def launch(
     if opts.secure:
         agents = [(a.name, AGENT_KINDS[a.kind]) for a in scenario.agents]
         root = Path(opts.run_dir) if opts.run_dir else run_dir(port)
-        secrets = create_secrets(root, grants(agents))
+        secrets = create_secrets(root, grants(agents, agent_groups(scenario)))
         say("launcher", f"security=on credentials={root / 'credentials'}")
     try:
         return await _launch(scenario, opts, say, summary, endpoint, secrets)

@@ -222,6 +222,31 @@ def load_scenario(path: Path) -> Scenario:
     return scenario
 
 
+def agent_groups(scenario: Scenario) -> dict[str, str]:
+    """The group of each BDI agent whose agent file asks other agents (a rule's `ask`):
+    the run's security lets its scheduler ask the others under it, and no other
+    agent's (docs/security.md)."""
+    out = {}
+    for agent in scenario.agents:
+        if agent.kind == "bdi" and agent.agent_file is not None:
+            data = read_agent_file(agent.agent_file, agent.name).data
+            group = data.get("group", "")
+            if isinstance(group, str) and group and _asks(data):
+                out[agent.name] = group
+    return out
+
+
+def _asks(data: dict[str, Any]) -> bool:
+    """Return whether an agent file's rules have an `ask` effect."""
+    rules = data.get("rules", [])
+    return isinstance(rules, list) and any(
+        isinstance(e, dict) and "ask" in e
+        for r in rules
+        if isinstance(r, dict) and isinstance(r.get("then"), list)
+        for e in r["then"]
+    )
+
+
 def performer_actions(scenario: Scenario) -> list[str]:
     """The actions the scenario's BDI agents leave to performers (`cbdi.performer`)."""
     found: set[str] = set()

@@ -14,7 +14,7 @@ its rule on `K/@adv/...`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,15 +113,28 @@ def _agent_reads(agent: str) -> tuple[str, ...]:
 _WORLD_ASKS = (keys.world_rpc("info"), keys.world_rpc("clock"))
 
 
-def agent_grants(agent: str, components: Iterable[str]) -> list[Grant]:
-    """The grants of one agent's services and of its performers and sensors."""
+def agent_grants(agent: str, components: Iterable[str], group: str = "") -> list[Grant]:
+    """The grants of one agent's services and of its performers and sensors.
+
+    With `group` (its agent file's), its scheduler may ask any agent under that group
+    (a rule's `ask`, docs/agents.md); never under `operator` or `sensors`, which are
+    not an agent file's to claim.
+    """
     out = []
+    peers = group if group and group not in (OPERATOR_GROUP, SENSOR_GROUP) else ""
     for component in components:
-        # Only its executor asks the world for its actions.
+        # Only its executor asks the world for its actions; only its scheduler, the group.
         act = (keys.world_act(agent),) if component == "executor" else ()
-        asks: tuple[str, ...] = (*_WORLD_ASKS, f"{ROOT}/{agent}/**", *act)
+        ask = peers if component == "scheduler" else ""
+        group_asks = (keys.agent_request("*", ask),) if ask else ()
+        asks: tuple[str, ...] = (*_WORLD_ASKS, f"{ROOT}/{agent}/**", *act, *group_asks)
         out.append(
-            _service(keys.service_id(component, agent), read=_agent_reads(agent), query=asks)
+            _service(
+                keys.service_id(component, agent),
+                read=_agent_reads(agent),
+                query=asks,
+                groups=(ask,) if ask else (),
+            )
         )
     performer = keys.service_id(PERFORMER, agent)
     out.append(
@@ -142,8 +155,11 @@ def agent_grants(agent: str, components: Iterable[str]) -> list[Grant]:
     return out
 
 
-def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
-    """Return every identity of a run of `agents` (name, its components).
+def grants(
+    agents: Sequence[tuple[str, Sequence[str]]], groups: Mapping[str, str] | None = None
+) -> list[Grant]:
+    """Return every identity of a run of `agents` (name, its components); `groups`: each
+    agent's group (its agent file's), under which its scheduler may ask the others.
 
     The world alone writes world state, events and percepts; the monitor and the
     launcher read everything, and so does `viewer` (`cbdi view --live`), which writes
@@ -176,7 +192,7 @@ def grants(agents: Sequence[tuple[str, Sequence[str]]]) -> list[Grant]:
         ),
     ]
     for agent, components in agents:
-        out += agent_grants(agent, components)
+        out += agent_grants(agent, components, (groups or {}).get(agent, ""))
     return out
 
 

@@ -198,7 +198,10 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     condition literals are written as in agent files (`(parcel_at p1 c_6_1)`,
     `(not (holding {self} *))`). It is served only
     if `group` is one of this agent's allowed groups. `deadline` is relative to the
-    time the desire is added (0: none).
+    time the desire is added (0: none). `epoch`: the asker's epoch, set by an agent that
+    asks from a rule (`ask`, docs/agents.md): what the request changes is applied before
+    the asked agent's percepts of the next epoch, so a lockstep run stays a function of
+    its inputs; -1 (an operator, a sensor): at once.
     """
 
     from_agent: AgentName
@@ -211,6 +214,7 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     deadline: NonNegative = 0.0
     precondition: Condition = []
     context: Condition = []
+    epoch: Epoch = -1
 
 
 class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):

@@ -32,6 +32,7 @@ __all__ = [
     "ActionOutcome",
     "ActionReply",
     "ActionRequest",
+    "AgentSeen",
     "AgentStats",
     "AgentView",
     "BinView",
@@ -117,6 +118,13 @@ class ItemView(Message, frozen=True, tag="cbdi.world.ItemView/1"):
     known: bool = True
 
 
+class AgentSeen(Message, frozen=True, tag="cbdi.world.AgentSeen/1"):
+    """Another agent standing on a cell of the sensed square."""
+
+    name: AgentName
+    cell: Cell
+
+
 # What the world had published on an agent's keys when it sent the agent's percepts (the
 # last of its epoch): the count of its outcomes key, cumulative (as `EpochAck.sent`). A
 # gate holding fewer waits for the rest: the bus may recover one key's samples later than
@@ -130,7 +138,8 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     `free` cells are inside the map and hold no wall, bin, person or agent; `blocked` are
     the other in-map cells of the square (the agent's own cell is reported as blocked by
     itself only in `position`). `items` lists the items lying in the square, `holding`
-    those the agent carries. `sent`: see `WorldSent` (the world service fills it in).
+    those the agent carries, `others` the other agents standing in it (which of the
+    `blocked` cells they hold). `sent`: see `WorldSent` (the world service fills it in).
     """
 
     agent: AgentName
@@ -143,6 +152,7 @@ class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
     items: Many[ItemView]
     holding: Many[Symbol]
     sent: WorldSent = {}
+    others: Many[AgentSeen] = []
 
 
 class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
