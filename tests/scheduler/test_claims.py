@@ -118,13 +118,6 @@ def test_an_unknown_cost_is_sent_in_a_first_claim_only_and_never_wins_a_bid() ->
     assert a.claim(atom, 2, lambda i: math.inf, pursuing={"p1"}) == []
     assert a.held["p1"]["robot1"].cost == 12.0
     assert [c.cost for c in a.claim(atom, 3, lambda i: 4.0, pursuing={"p1"})] == [4.0]
-    # In hand, then put away by an action still running (neither on the ground nor in
-    # hand, not yet achieved): the claim stays a holder's, no other robot takes it over.
-    assert [c.cost for c in a.claim(atom, 4, lambda i: 0.0, holding={"p1"}, pursuing={"p1"})] == [
-        HOLDING
-    ]
-    assert a.claim(atom, 5, lambda i: UNKNOWN, pursuing={"p1"}) == []
-    assert a.held["p1"]["robot1"].cost == HOLDING
     b = Claims("robot2", "recyclers", frozenset({"recycled"}))
     assert [c.cost for c in b.claim(atom, 0, lambda i: math.inf)] == [UNKNOWN]  # finite
     assert not a.would_win("p2", 0, math.inf) and a.would_win("p2", 0, 3.0)

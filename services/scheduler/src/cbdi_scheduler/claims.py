@@ -21,10 +21,9 @@ round of messages:
 3. **Fresh costs.** An agent sends its claim again when its cost changed by `REFRESH` or
    more, or it began or stopped pursuing or holding the item. A cost the agent does not
    know (`UNKNOWN` or more: no believed way) is sent only in a first claim (as
-   `UNKNOWN`): a claim standing keeps the last known cost (or holding), since a way
-   believed blocked for a moment, or an item neither on the ground nor in hand while an
-   action puts it somewhere, must not hand the item over and back (a plan that truly
-   fails gives the claim back, rule 5).
+   `UNKNOWN`): a claim standing keeps the last known cost, since a way believed blocked
+   for a moment must not hand the item over and back (a plan that truly fails gives the
+   claim back, rule 5).
 4. **Bids.** An agent whose rules want an item another owns claims it only when that
    claim would win the item now (`would_win`, with the owner's standing claim), and
    withdraws a claim that lost once its contest has settled (an epoch after it was
@@ -115,8 +114,8 @@ class Claims:
                 continue
             before = self.held.get(item, {}).get(self.agent)
             c = HOLDING if item in holding else _known(float(cost(item)))
-            if c == UNKNOWN and before is not None:
-                c = before.cost  # keep the last known cost, or holding (rule 3)
+            if c == UNKNOWN and before is not None and before.cost >= 0:
+                c = before.cost  # keep the last known cost (rule 3)
             now = Held(before.epoch if before is not None else epoch, c, item in pursuing)
             if before is not None and not _changed(before, now):
                 continue

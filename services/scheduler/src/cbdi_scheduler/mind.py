@@ -350,15 +350,8 @@ class Mind:
         for name, desire in list(self.desires.items()):
             mine = [g for g in desire.goal if self._ours(g.atom, holding)]
             # A claim ends when its goal atom is achieved: the item is free to be
-            # claimed anew if the atom becomes false again (work that comes back). We
-            # tell the group even if another owns the item now (it went to the other
-            # while our action achieving it was under way).
-            done = [
-                g.atom
-                for g in desire.goal
-                if self.beliefs.holds(g)
-                and (g in mine or claims.standing(claims.claimable(g.atom) or ""))
-            ]
+            # claimed anew if the atom becomes false again (work that comes back).
+            done = [g.atom for g in mine if self.beliefs.holds(g)]
             out.claims += claims.release(done, achieved=True)
             todo = [g.atom for g in mine if not self.beliefs.holds(g)]
             out.claims += claims.claim(
