@@ -55,9 +55,6 @@ class Mind:
         self.stop_asked: bool | None = None  # a safe stop (True) or a resume (False) asked
         self.halted_at = 0.0  # when the safe stop began: deadlines wait meanwhile
         self.claims = Claims(self.agent, spec.group, frozenset(spec.claim)) if spec.claim else None
-        # Goal atoms the rules want whose items another agent owns: bid on them when
-        # this agent could clearly do them sooner (`_bid`).
-        self.bids: set[tuple[str, ...]] = set()
         # The beliefs changed between cycles (an outcome, a sensor, an operator): the next
         # cycle counts it as a change, so a failed search waiting for one is retried.
         self.changed = False
@@ -88,7 +85,6 @@ class Mind:
             self.refire = False
             self._fire(out)
         self._coordinate(out)
-        self._bid(out)
         self._stop_or_resume(out)
         self._deliberate(out)
         if changed:
@@ -173,12 +169,10 @@ class Mind:
             return desires
         out = {}
         holding = self._holding()
-        self.bids = set()
         for name, d in desires.items():
             held = self.desires.get(name)
             old = set(held.goal) if held is not None else set()
             goal = tuple(g for g in d.goal if g in old or self._takes(g, holding))
-            self.bids |= {g.atom for g in d.goal if g not in goal and not self.beliefs.holds(g)}
             if held is not None and set(goal) == old:
                 out[name] = held  # what a boost brought was all others': nothing new
             elif goal:
@@ -271,10 +265,10 @@ class Mind:
                 out.events.append(self.event(c.desire, "waiting", c.reason))
         return out
 
-    def _dropped(self, desire: Desire, reason: str, out: Reaction, release: bool = True) -> None:
+    def _dropped(self, desire: Desire, reason: str, out: Reaction) -> None:
         out.events.append(self.event(desire, "dropped", reason))
         self.refire = True
-        if self.claims is not None and release:  # others may take up what we gave up
+        if self.claims is not None:  # others may take up what we gave up (not held)
             held = self._holding()
             out.claims += self.claims.release(
                 g.atom for g in desire.goal if self.claims.claimable(g.atom) not in held
@@ -285,34 +279,6 @@ class Mind:
         (we claim it as its holder), even if another agent's claim won it before."""
         assert self.claims is not None
         return self.claims.foreign(atom) is None or self.claims.claimable(atom) in holding
-
-    def _bid(self, out: Reaction) -> None:
-        """For each item the rules want that another agent owns: withdraw our losing
-        claim once the contest settled (an epoch after it was made), and claim it when
-        the claim would win it (we could clearly do it sooner, `cbdi_scheduler.claims`);
-        the rules take an item that became ours up next cycle."""
-        claims = self.claims
-        if claims is None or not self.bids:
-            return
-        for atom in sorted(self.bids):
-            item = claims.claimable(atom)
-            if item is None or self.beliefs.holds(fact(*atom)):
-                self.bids.discard(atom)
-                continue
-            owner = claims.owner(item)
-            if owner is None or owner == self.agent:  # free again, or ours: take it up
-                self.bids.discard(atom)
-                self.refire = True
-            elif claims.would_win(item, self.epoch, self._cost(item)):
-                out.claims += claims.claim([atom], self.epoch, self._cost)
-                self.refire = True
-            elif item not in claims.settled(self.epoch) or not claims.standing(item):
-                continue
-            else:
-                out.claims += claims.release([atom])
-
-    def _cost(self, item: str) -> float:
-        return self.knowledge.cost(self.beliefs, self.agent, item)
 
     def _takes(self, goal: Belief, holding: set[str]) -> bool:
         """Return whether a rule's new goal atom is ours to take up: its object is free
@@ -353,17 +319,16 @@ class Mind:
             # claimed anew if the atom becomes false again (work that comes back).
             done = [g.atom for g in mine if self.beliefs.holds(g)]
             out.claims += claims.release(done, achieved=True)
-            todo = [g.atom for g in mine if not self.beliefs.holds(g)]
             out.claims += claims.claim(
-                todo, self.epoch, self._cost, holding=holding, pursuing=claims.settled(self.epoch)
+                (g.atom for g in mine if not self.beliefs.holds(g)),
+                self.epoch,
+                lambda item: self.knowledge.cost(self.beliefs, self.agent, item),
+                holding=holding,
             )
             if len(mine) == len(desire.goal):
                 continue
             left = [g.atom for g in desire.goal if g not in mine]
             owners = sorted({f"{' '.join(a)} by {claims.foreign(a)}" for a in left})
-            # What another agent owns is a bid now: `_bid` withdraws it once the contest
-            # has settled, and claims it again if ever we could clearly do it sooner.
-            self.bids |= set(left)
             if mine:
                 self.desires[name] = replace(desire, goal=tuple(mine))
                 reason = "claimed by others: " + ", ".join(owners)
@@ -371,7 +336,7 @@ class Mind:
                 continue
             del self.desires[name]
             reason = "claimed by others: " + ", ".join(owners)
-            self._dropped(desire, reason, out, release=False)
+            self._dropped(desire, reason, out)
             if self.intentions.current is not None and self.intentions.current.desire.name == name:
                 out.commands += self.intentions.drop(reason)
 

@@ -296,13 +296,11 @@ class AgentState(Message, frozen=True, tag="cbdi.agent.AgentState/1"):
 class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     """An agent claims (or, `released`, gives up) a goal object within its group.
 
-    How claims decide is `cbdi_scheduler.claims` (docs/agents.md): the claims on an
-    object compete by `cost` (the claimer's way to it, sent again as it changes), the
-    load each claimer already has, and `pursuing` (the claimer has the object in its
-    goal: its claim counts a margin less, so another takes the object over only when
-    clearly cheaper); then the earliest claim (`epoch`), then the first agent name.
-    `achieved`: a release because the claimer achieved the goal atom (`["delivered",
-    "p1"]`, its second symbol the item): the group believes it, every claim on it ends.
+    How claims decide is `cbdi_scheduler.claims` (docs/agents.md): claims made about the
+    same time compete by `cost` (the claimer's way to the object) and the load each
+    claimer already has; a much later claim never takes the object over. `achieved`: a
+    release because the claimer achieved the goal atom (`["delivered", "p1"]`, its
+    second symbol the item): the group believes it, and every claim on the object ends.
     """
 
     agent: AgentName
@@ -311,7 +309,6 @@ class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     epoch: Epoch = -1
     cost: Finite = 0.0
     released: bool = False
-    pursuing: bool = False
     achieved: Annotated[list[Symbol], msgspec.Meta(max_length=32)] = []
 
     def __post_init__(self) -> None:
