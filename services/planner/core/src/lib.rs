@@ -17,12 +17,15 @@
 //! its planner explores.
 
 mod apply;
+mod climb;
 mod extract;
 mod graph;
 mod moves;
 mod numeric;
 mod pyset;
+mod rounds;
 mod schedule;
+mod search;
 mod starts;
 
 use graph::Graph;
@@ -192,6 +195,9 @@ fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<moves::Moves>()?;
     m.add_class::<moves::Placing>()?;
     m.add_class::<Schedule>()?;
+    m.add_class::<rounds::Rounds>()?;
+    m.add_class::<search::Search>()?;
+    m.add_class::<search::SearchNode>()?;
     m.add_class::<starts::Starts>()?;
     Ok(())
 }

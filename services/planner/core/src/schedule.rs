@@ -23,7 +23,9 @@ const CHUNK: usize = 32;
 #[derive(Clone)]
 struct Chunk {
     kinds: Vec<u8>,
+    actions: Vec<usize>,
     partners: Vec<i64>,
+    lows: Vec<f64>,
     highs: Vec<f64>,
     codes: Vec<usize>,
     /// Each step's `Touches::folds` (the first six), here beside its code: a scan for
@@ -38,7 +40,9 @@ impl Chunk {
     fn new() -> Self {
         Chunk {
             kinds: Vec::with_capacity(CHUNK),
+            actions: Vec::with_capacity(CHUNK),
             partners: Vec::with_capacity(CHUNK),
+            lows: Vec::with_capacity(CHUNK),
             highs: Vec::with_capacity(CHUNK),
             codes: Vec::with_capacity(CHUNK),
             folds: Vec::with_capacity(CHUNK),
@@ -59,7 +63,7 @@ pub struct Schedule {
     chunks: Vec<Arc<Chunk>>,
     times: Vec<f64>,
     #[pyo3(get)]
-    span: f64,
+    pub(crate) span: f64,
 }
 
 /// The happenings certain to come after a step: `(start step, end snap code)` of each
@@ -94,17 +98,18 @@ impl Schedule {
             .collect()
     }
 
-    /// `Timeline.extend`: the schedule with a step appended (its kind, partner, bounds
-    /// and snap code), or None if inconsistent. `future` (None: not checked) holds the
-    /// happenings certain to come: `(start step, end snap code)` of each running action,
-    /// `(time, snap code)` of each timed literal still to happen.
+    /// `Timeline.extend`: the schedule with a step appended (its kind, action, partner,
+    /// bounds and snap code), or None if inconsistent. `future` (None: not checked) holds
+    /// the happenings certain to come: `(start step, end snap code)` of each running
+    /// action, `(time, snap code)` of each timed literal still to happen.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (oracle, kind, partner, low, high, code, future, epsilon))]
+    #[pyo3(signature = (oracle, kind, action, partner, low, high, code, future, epsilon))]
     fn extend(
         &self,
         py: Python<'_>,
         oracle: &Interference,
         kind: u8,
+        action: usize,
         partner: i64,
         low: f64,
         high: f64,
@@ -124,20 +129,38 @@ impl Schedule {
                 "a step or happening is unknown to the schedule",
             ));
         }
+        let step = StepSpec {
+            kind,
+            action,
+            partner,
+            low,
+            high,
+            code,
+        };
         Ok(py.detach(|| {
             let snaps = oracle.snaps.read().expect("interference lock");
-            self.extended(
-                &snaps,
-                kind,
-                partner,
-                low,
-                high,
-                code,
-                future.as_ref(),
-                epsilon,
-            )
+            let mut out = self.clone();
+            out.append(&snaps, &step, future.as_ref(), epsilon)
+                .then_some(out)
         }))
     }
+
+    /// Each step's `(kind, action, partner, low, high)`, as `stn.Step` has them.
+    fn steps(&self) -> Vec<(u8, usize, i64, f64, f64)> {
+        (0..self.len()).map(|k| self.step(k)).collect()
+    }
+}
+
+/// A step to append: its kind, action (a timed literal's group), partner (-1: none),
+/// bounds and snap code.
+#[derive(Clone, Copy)]
+pub(crate) struct StepSpec {
+    pub kind: u8,
+    pub action: usize,
+    pub partner: i64,
+    pub low: f64,
+    pub high: f64,
+    pub code: usize,
 }
 
 impl Schedule {
@@ -180,24 +203,30 @@ impl Schedule {
         out
     }
 
+    /// Step k's `(kind, action, partner, low, high)`.
+    pub(crate) fn step(&self, k: usize) -> (u8, usize, i64, f64, f64) {
+        let (c, j) = self.chunk(k);
+        (
+            c.kinds[j],
+            c.actions[j],
+            c.partners[j],
+            c.lows[j],
+            c.highs[j],
+        )
+    }
+
     /// Append a step (its time not yet set).
-    fn push(
-        &mut self,
-        snap: &Touches,
-        kind: u8,
-        partner: i64,
-        high: f64,
-        code: usize,
-        incoming: &[(usize, f64)],
-    ) {
+    fn push(&mut self, snap: &Touches, step: &StepSpec, incoming: &[(usize, f64)]) {
         if self.len().is_multiple_of(CHUNK) {
             self.chunks.push(Arc::new(Chunk::new()));
         }
         let chunk = Arc::make_mut(self.chunks.last_mut().expect("a chunk"));
-        chunk.kinds.push(kind);
-        chunk.partners.push(partner);
-        chunk.highs.push(high);
-        chunk.codes.push(code);
+        chunk.kinds.push(step.kind);
+        chunk.actions.push(step.action);
+        chunk.partners.push(step.partner);
+        chunk.lows.push(step.low);
+        chunk.highs.push(step.high);
+        chunk.codes.push(step.code);
         let f = &snap.folds;
         chunk.folds.push([f[0], f[1], f[2], f[3], f[4], f[5]]);
         for &(i, w) in incoming {
@@ -207,38 +236,22 @@ impl Schedule {
         chunk.edge_off.push(chunk.edge_src.len());
     }
 
-    /// `Timeline.extend`: the schedule with a step appended (None: inconsistent).
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn extended(
-        &self,
-        snaps: &[Touches],
-        kind: u8,
-        partner: i64,
-        low: f64,
-        high: f64,
-        code: usize,
-        future: Option<&Coming>,
-        eps: f64,
-    ) -> Option<Schedule> {
-        let mut out = self.clone();
-        out.append(snaps, kind, partner, low, high, code, future, eps)
-            .then_some(out)
-    }
-
-    /// `extended` in place (several steps appended copy the schedule once): false when
-    /// inconsistent, the schedule then half extended (to be dropped).
-    #[allow(clippy::too_many_arguments)]
+    /// `Timeline.extend` in place (several steps appended copy the schedule once): false
+    /// when inconsistent, the schedule then half extended (to be dropped).
     pub(crate) fn append(
         &mut self,
         snaps: &[Touches],
-        kind: u8,
-        partner: i64,
-        low: f64,
-        high: f64,
-        code: usize,
+        step: &StepSpec,
         future: Option<&Coming>,
         eps: f64,
     ) -> bool {
+        let StepSpec {
+            kind,
+            partner,
+            low,
+            code,
+            ..
+        } = *step;
         let n = self.len();
         let mut incoming: Vec<(usize, f64)> = self
             .interfering(snaps, code)
@@ -248,7 +261,7 @@ impl Schedule {
         if kind == END {
             incoming.push((partner as usize, low));
         }
-        self.push(&snaps[code], kind, partner, high, code, &incoming);
+        self.push(&snaps[code], step, &incoming);
         // `Timeline._base`
         let mut value = if kind == TIL { low } else { 0.0 };
         for &(i, w) in &incoming {
