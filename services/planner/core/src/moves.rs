@@ -10,7 +10,7 @@
 //! schedule with the happenings certain to come after each (`Expander._future`).
 
 use crate::apply::{check_within, test, Conj, Duration, Facts, Snap};
-use crate::schedule::{Coming, Schedule, StepSpec, END};
+use crate::schedule::{Future, Schedule, StepSpec, END};
 use crate::starts::Starts;
 use crate::{Interference, Touches};
 use pyo3::exceptions::PyValueError;
@@ -81,6 +81,8 @@ pub struct Moves {
     actions: Vec<Action>,
     tils: Vec<Til>,
     starts: Starts,
+    /// `(time, snap code)` of each group of timed literals, in order.
+    coming: Vec<(f64, usize)>,
     words: usize,
     vars: usize,
     oracle: Py<Interference>,
@@ -159,10 +161,12 @@ impl Moves {
         if needs.len() != out.len() || needs.iter().flatten().any(|&f| f as usize >= facts) {
             return Err(PyValueError::new_err("needs: one list of facts per action"));
         }
+        let coming = tils.iter().map(|t| (t.time, t.code)).collect();
         Ok(Moves {
             actions: out,
             tils,
             starts: Starts::new(needs),
+            coming,
             words: facts.div_ceil(64).max(1),
             vars,
             oracle,
@@ -288,16 +292,15 @@ impl Moves {
     ) -> Option<Schedule> {
         let mut out = net.clone();
         for p in steps {
-            let coming: Coming = (
-                p.running
-                    .iter()
-                    .map(|&(a, s)| (s, self.actions[a].codes.1))
-                    .collect(),
-                self.tils[p.til..]
-                    .iter()
-                    .map(|t| (t.time, t.code))
-                    .collect(),
-            );
+            let ends: Vec<(usize, usize)> = p
+                .running
+                .iter()
+                .map(|&(a, s)| (s, self.actions[a].codes.1))
+                .collect();
+            let coming = Future {
+                ends: &ends,
+                deadlines: &self.coming[p.til..],
+            };
             let code = match p.kind {
                 TIL => self.tils[p.action].code,
                 END => self.actions[p.action].codes.1,
@@ -311,7 +314,7 @@ impl Moves {
                 high: p.high,
                 code,
             };
-            if !out.append(snaps, &step, Some(&coming), epsilon) {
+            if !out.append(snaps, &step, Some(coming), epsilon) {
                 return None;
             }
         }

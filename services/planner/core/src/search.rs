@@ -129,11 +129,15 @@ impl Node {
 /// A happening applied to a node's state, not yet scheduled (`expansion.Move`).
 pub(crate) struct Move {
     pub state: Arc<State>,
-    pub running: Vec<(usize, usize)>,
     pub steps: Vec<Scheduled>,
 }
 
 impl Move {
+    /// The actions running after the move: `(action, start step)`.
+    pub(crate) fn running(&self) -> &[(usize, usize)] {
+        &self.steps.last().expect("a move has a step").running
+    }
+
     /// Whether the step that chose the move is helpful in `parent` (`search._helpful_step`).
     pub(crate) fn helpful_in(&self, parent: &Node) -> bool {
         let first = &self.steps[0];
@@ -525,22 +529,22 @@ impl Search {
         let found = moves.generate(&at, &candidates, self.compress, self.epsilon);
         found
             .into_iter()
-            .map(|placed| {
-                let last = placed.last().expect("a move has a step");
+            .map(|mut placed| {
+                let last = placed.pop().expect("a move has a step");
                 let state = State {
-                    facts: last.facts.clone(),
-                    nums: match &last.nums {
-                        Some(values) => Arc::new(values.clone()),
+                    facts: last.facts,
+                    nums: match last.nums {
+                        Some(values) => Arc::new(values),
                         None => state.nums.clone(),
                     },
-                    open: last.open.clone(),
+                    open: last.open,
                     til: last.step.til,
                 };
-                let running = last.step.running.clone();
+                let mut steps: Vec<Scheduled> = placed.into_iter().map(|p| p.step).collect();
+                steps.push(last.step);
                 Move {
                     state: Arc::new(state),
-                    running,
-                    steps: placed.into_iter().map(|p| p.step).collect(),
+                    steps,
                 }
             })
             .collect()
@@ -567,7 +571,7 @@ impl Search {
     /// The evaluated node a scheduled move makes.
     pub(crate) fn child(&mut self, parent: &Node, mv: &Move, schedule: Schedule) -> Node {
         let running = mv
-            .running
+            .running()
             .iter()
             .map(|&(a, s)| {
                 let (_, _, _, low, high) = schedule.step(s);

@@ -109,6 +109,9 @@ class Expander:
         self._by_fact: dict[int, list[int]] = {}
         # Compiled: its nodes and search loops (`loops`), this expander's aim and counts.
         self.native: Any = None
+        # The steps of the nodes made from handles, by what they are: a continual
+        # search's rounds return plans that share their first steps.
+        self._steps: dict[tuple[int, int, int, float, float], Step] = {}
         if self._compiled is not None:
             self._oracle = self._compiled.oracle
             self._til_snaps = list(self._compiled.tils)
@@ -152,9 +155,15 @@ class Expander:
         compiled = self._compiled
         assert compiled is not None
         facts, nums, open_, til, running, h, helpful, h_time, net, placed = handle.view()
-        snaps = compiled.snaps
-        steps = tuple(Step(k, a, snaps[k][a], p, lo, hi) for k, a, p, lo, hi in placed)
-        timeline = Timeline(steps, net, self.epsilon, net.span, compiled.oracle)
+        made, snaps = self._steps, compiled.snaps
+        steps = []
+        for row in placed:  # (kind, action, partner, low, high)
+            step = made.get(row)
+            if step is None:
+                kind, action, partner, low, high = row
+                step = made[row] = Step(kind, action, snaps[kind][action], partner, low, high)
+            steps.append(step)
+        timeline = Timeline(tuple(steps), net, self.epsilon, net.span, compiled.oracle)
         state = State(int.from_bytes(facts, "little"), nums, open_, til)
         return Node(state, timeline, running, h, frozenset(helpful), h_time, handle)
 
