@@ -11,10 +11,13 @@
 //! (`cbdi_planner.stn.Timeline`): which earlier steps a new one must follow, and the
 //! earliest consistent times, and a node's successors (`Expander.moves`: every
 //! happening applied in one call, `moves`, with the semantics of `apply`) and a move's
-//! steps put on its timeline in one call (`Expander.schedule`).
+//! steps put on its timeline in one call (`Expander.schedule`), and whole search loops
+//! in one call over nodes kept here (`search`): the offline planner's enforced
+//! hill-climbing and best-first search (`climb`), the continual planner's rounds with
+//! their open and closed lists (`rounds`).
 //!
 //! A call runs without the interpreter lock: a service's event loop keeps going while
-//! its planner explores.
+//! its planner explores (a loop takes it back only to call a Python clock).
 
 mod apply;
 mod climb;
