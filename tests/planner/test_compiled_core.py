@@ -492,3 +492,74 @@ def test_a_timeline_of_other_codes_is_extended_by_them() -> None:
     for e, node in zip((python, ex), nodes, strict=True):
         views.append([_schedule_view(e.schedule(node.timeline, m)) for m in e.moves(node)])
     assert views[0] == views[1] and any(v is not None for v in views[0])
+
+
+def rounds(task: Task, core: str, **how: Any) -> list[object]:
+    """What a continual search does, round by round, on `core`: each round's statistics,
+    partial plans, mode changes and failures, then what its expander counted."""
+    os.environ["CBDI_SEARCH_CORE"] = core
+    thread = SearchThread(task, initial_state(task), **how)
+    seen: list[object] = []
+    for _ in range(60):
+        for e in thread.step(RoundBound(expansions=60, plan_size=6)):
+            if isinstance(e, RoundDone):
+                seen.append((e.kind, e.mode, e.expanded, e.best_h, e.plan_actions))
+            elif isinstance(e, PartialPlanFound):
+                seen.append((e.complete, e.baseline, [(a.time, a.name) for a in e.plan.actions]))
+            else:
+                seen.append(e)
+        if thread.finished:
+            break
+    ex = thread.space.expander
+    seen.append((ex.generated, ex.evaluated, ex.inconsistent, ex.subgoal))
+    return seen
+
+
+_ROUNDS = ["paper-7x7", "warehouse-15x15", "hops", "zenotravel", *sorted(FEATURES)]
+
+
+@pytest.mark.parametrize("problem", _ROUNDS)
+@pytest.mark.parametrize(
+    "how",
+    [{}, {"agenda": True}, {"mode": "NG"}, {"empty_rounds": 1}],
+    ids=["G", "agenda", "NG", "fall-back"],
+)
+def test_continual_rounds_in_one_call_are_the_same(
+    monkeypatch: pytest.MonkeyPatch, problem: str, how: dict[str, Any]
+) -> None:
+    """A round in one call of the compiled core (`Rounds`): the same rounds, plans,
+    mode changes and counts as the Python reference, greedy (with a goal agenda too),
+    complete, and falling back from one to the other."""
+    monkeypatch.setenv("CBDI_SEARCH_CORE", "python")  # restored after the test
+    task = task_named(problem)
+    assert rounds(task, "python", **how) == rounds(task, "compiled", **how)
+
+
+@pytest.mark.parametrize("how", ["expansions", "reroot"])
+def test_a_broken_round_is_caught(monkeypatch: pytest.MonkeyPatch, how: str) -> None:
+    """The comparison above finds rounds that expand one node more, or a search re-rooted
+    on its first root rather than on the node the round returned."""
+    task = recycling("warehouse-15x15")
+    monkeypatch.setenv("CBDI_SEARCH_CORE", "python")
+    python = rounds(task, "python")
+    module = compiled("compiled")
+    assert module is not None
+    working = module.Rounds
+
+    class Broken:
+        def __init__(self, search: Any, root: Any, mode: str, agenda: bool) -> None:
+            self.core = working(search, root, mode, agenda)
+            self.root = root
+
+        def search_round(self, seconds: Any, expansions: int, *rest: Any) -> Any:
+            more = expansions + (how == "expansions")
+            return self.core.search_round(seconds, more, *rest)
+
+        def reroot(self, node: Any) -> None:
+            self.core.reroot(self.root if how == "reroot" else node)
+
+        def restart(self, mode: str, root: Any) -> Any:
+            return self.core.restart(mode, root)
+
+    monkeypatch.setattr(module, "Rounds", Broken)
+    assert rounds(task, "compiled") != python

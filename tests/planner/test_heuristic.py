@@ -73,6 +73,8 @@ def _sampled(
         return estimate(self, state)
 
     monkeypatch.setattr(RelaxedPlanGraph, "estimate", recording)
+    # the Python core's search: the compiled one evaluates its states without Python
+    monkeypatch.setenv("CBDI_SEARCH_CORE", "python")
     search(task, strategy=strategy, budget=Budget(max_expansions=expansions), compress=compress)
     monkeypatch.undo()
     step = max(1, len(seen) // SAMPLES)

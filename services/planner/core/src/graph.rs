@@ -289,6 +289,57 @@ impl Graph {
 }
 
 impl Graph {
+    /// `estimate` for the compiled search (a state it made, so not checked).
+    pub(crate) fn relaxed(
+        &self,
+        facts: &[u8],
+        open: &[usize],
+        til: usize,
+        nums: &[f64],
+        goals: &[usize],
+    ) -> Option<Relaxed> {
+        SCRATCH.with(|cell| {
+            let s = &mut *cell.borrow_mut();
+            if !self.run(s, facts, open, til, nums, goals) {
+                return None;
+            }
+            let ops = Ops {
+                kind: &self.op_kind,
+                action: &self.op_action,
+                pre: &self.op_pre,
+                add: &self.op_add,
+                adders: &self.adders,
+                start_op: &self.start_op,
+                duration: &self.op_duration,
+                exact: self.exact,
+            };
+            Some(extract(&ops, goals, &s.layers, til, &mut s.marks))
+        })
+    }
+
+    /// `RelaxedPlanGraph.levels`: the first layer of each of `wanted` (None: one never).
+    pub(crate) fn levels(
+        &self,
+        facts: &[u8],
+        open: &[usize],
+        til: usize,
+        nums: &[f64],
+        wanted: &[usize],
+    ) -> Option<Vec<i32>> {
+        SCRATCH.with(|cell| {
+            let s = &mut *cell.borrow_mut();
+            if !self.run(s, facts, open, til, nums, wanted) {
+                return None;
+            }
+            Some(wanted.iter().map(|&f| s.layers.level[f]).collect())
+        })
+    }
+
+    /// The first token fact of running actions (`RelaxedPlanGraph.pending`).
+    pub(crate) fn pending(&self) -> usize {
+        self.pending
+    }
+
     /// Refuse a state or goals outside the graph.
     fn check_state(
         &self,

@@ -11,18 +11,24 @@
 //! (`cbdi_planner.stn.Timeline`): which earlier steps a new one must follow, and the
 //! earliest consistent times, and a node's successors (`Expander.moves`: every
 //! happening applied in one call, `moves`, with the semantics of `apply`) and a move's
-//! steps put on its timeline in one call (`Expander.schedule`).
+//! steps put on its timeline in one call (`Expander.schedule`), and whole search loops
+//! in one call over nodes kept here (`search`): the offline planner's enforced
+//! hill-climbing and best-first search (`climb`), the continual planner's rounds with
+//! their open and closed lists (`rounds`).
 //!
 //! A call runs without the interpreter lock: a service's event loop keeps going while
-//! its planner explores.
+//! its planner explores (a loop takes it back only to call a Python clock).
 
 mod apply;
+mod climb;
 mod extract;
 mod graph;
 mod moves;
 mod numeric;
 mod pyset;
+mod rounds;
 mod schedule;
+mod search;
 mod starts;
 
 use graph::Graph;
@@ -192,6 +198,9 @@ fn cbdi_planner_core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<moves::Moves>()?;
     m.add_class::<moves::Placing>()?;
     m.add_class::<Schedule>()?;
+    m.add_class::<rounds::Rounds>()?;
+    m.add_class::<search::Search>()?;
+    m.add_class::<search::SearchNode>()?;
     m.add_class::<starts::Starts>()?;
     Ok(())
 }

@@ -10,16 +10,16 @@
 //! schedule with the happenings certain to come after each (`Expander._future`).
 
 use crate::apply::{check_within, test, Conj, Duration, Facts, Snap};
-use crate::schedule::{Coming, Schedule, END};
+use crate::schedule::{Future, Schedule, StepSpec, END};
 use crate::starts::Starts;
-use crate::Interference;
+use crate::{Interference, Touches};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
 
-const START: u8 = 0;
-const INST: u8 = 2;
-const TIL: u8 = 3;
+pub(crate) const START: u8 = 0;
+pub(crate) const INST: u8 = 2;
+pub(crate) const TIL: u8 = 3;
 
 struct Action {
     start: Snap,
@@ -40,23 +40,23 @@ struct Til {
 /// One step of a move as the schedule takes it: `(kind, action, partner, low, high)`
 /// as `stn.Step` has them, the actions running after it (`(action, start step)`) and
 /// the timed literals still to come (from group `til` on).
-struct Scheduled {
-    kind: u8,
-    action: usize,
-    partner: i64,
-    low: f64,
-    high: f64,
-    running: Vec<(usize, usize)>,
-    til: usize,
+pub(crate) struct Scheduled {
+    pub kind: u8,
+    pub action: usize,
+    pub partner: i64,
+    pub low: f64,
+    pub high: f64,
+    pub running: Vec<(usize, usize)>,
+    pub til: usize,
 }
 
 /// One step of a move and the state after it.
-struct Placed {
-    step: Scheduled,
-    facts: Facts,
+pub(crate) struct Placed {
+    pub step: Scheduled,
+    pub facts: Facts,
     /// None: the node's values.
-    nums: Option<Vec<f64>>,
-    open: Vec<usize>,
+    pub nums: Option<Vec<f64>>,
+    pub open: Vec<usize>,
 }
 
 /// The steps of a move, to schedule (`Moves.schedule`).
@@ -66,14 +66,14 @@ pub struct Placing {
 }
 
 /// A node as `moves` reads it.
-struct Node<'a> {
-    facts: &'a [u64],
-    nums: &'a [f64],
-    open: &'a [usize],
-    til: usize,
+pub(crate) struct Node<'a> {
+    pub facts: &'a [u64],
+    pub nums: &'a [f64],
+    pub open: &'a [usize],
+    pub til: usize,
     /// `(action, start step, low, high)` of each running action.
-    running: &'a [(usize, usize, f64, f64)],
-    steps: usize,
+    pub running: &'a [(usize, usize, f64, f64)],
+    pub steps: usize,
 }
 
 #[pyclass(frozen, module = "cbdi_planner_core")]
@@ -81,6 +81,8 @@ pub struct Moves {
     actions: Vec<Action>,
     tils: Vec<Til>,
     starts: Starts,
+    /// `(time, snap code)` of each group of timed literals, in order.
+    coming: Vec<(f64, usize)>,
     words: usize,
     vars: usize,
     oracle: Py<Interference>,
@@ -159,10 +161,12 @@ impl Moves {
         if needs.len() != out.len() || needs.iter().flatten().any(|&f| f as usize >= facts) {
             return Err(PyValueError::new_err("needs: one list of facts per action"));
         }
+        let coming = tils.iter().map(|t| (t.time, t.code)).collect();
         Ok(Moves {
             actions: out,
             tils,
             starts: Starts::new(needs),
+            coming,
             words: facts.div_ceil(64).max(1),
             vars,
             oracle,
@@ -271,43 +275,77 @@ impl Moves {
         }
         Ok(py.detach(|| {
             let snaps = self.oracle.get().snaps.read().expect("interference lock");
-            let mut out = net.clone();
-            for p in &placing.steps {
-                let coming: Coming = (
-                    p.running
-                        .iter()
-                        .map(|&(a, s)| (s, self.actions[a].codes.1))
-                        .collect(),
-                    self.tils[p.til..]
-                        .iter()
-                        .map(|t| (t.time, t.code))
-                        .collect(),
-                );
-                let code = match p.kind {
-                    TIL => self.tils[p.action].code,
-                    END => self.actions[p.action].codes.1,
-                    _ => self.actions[p.action].codes.0,
-                };
-                let (kind, partner, low, high) = (p.kind, p.partner, p.low, p.high);
-                if !out.append(
-                    &snaps,
-                    kind,
-                    partner,
-                    low,
-                    high,
-                    code,
-                    Some(&coming),
-                    epsilon,
-                ) {
-                    return None;
-                }
-            }
-            Some(out)
+            self.placed(&snaps, net, &placing.steps, epsilon)
         }))
     }
 }
 
 impl Moves {
+    /// `net` with `steps` appended, each with the happenings certain to come after it
+    /// (None: inconsistent).
+    pub(crate) fn placed(
+        &self,
+        snaps: &[Touches],
+        net: &Schedule,
+        steps: &[Scheduled],
+        epsilon: f64,
+    ) -> Option<Schedule> {
+        let mut out = net.clone();
+        for p in steps {
+            let ends: Vec<(usize, usize)> = p
+                .running
+                .iter()
+                .map(|&(a, s)| (s, self.actions[a].codes.1))
+                .collect();
+            let coming = Future {
+                ends: &ends,
+                deadlines: &self.coming[p.til..],
+            };
+            let code = match p.kind {
+                TIL => self.tils[p.action].code,
+                END => self.actions[p.action].codes.1,
+                _ => self.actions[p.action].codes.0,
+            };
+            let step = StepSpec {
+                kind: p.kind,
+                action: p.action,
+                partner: p.partner,
+                low: p.low,
+                high: p.high,
+                code,
+            };
+            if !out.append(snaps, &step, Some(coming), epsilon) {
+                return None;
+            }
+        }
+        Some(out)
+    }
+
+    /// The actions whose needs hold in `packed` facts (little-endian bytes), sorted.
+    pub(crate) fn startable(&self, packed: &[u8]) -> Vec<u32> {
+        self.starts.within(packed)
+    }
+
+    /// How many words a state's facts take.
+    pub(crate) fn words(&self) -> usize {
+        self.words
+    }
+
+    /// How many numeric values a state has at least.
+    pub(crate) fn vars(&self) -> usize {
+        self.vars
+    }
+
+    /// How many actions the task has.
+    pub(crate) fn actions(&self) -> usize {
+        self.actions.len()
+    }
+
+    /// The interference of the task's snaps.
+    pub(crate) fn oracle(&self) -> &Interference {
+        self.oracle.get()
+    }
+
     /// Whether the invariants of actions `running` hold.
     fn invariants_hold(&self, running: &[usize], facts: &[u64], nums: &[f64]) -> bool {
         running
@@ -336,7 +374,7 @@ impl Moves {
         Some((facts, values, open))
     }
 
-    fn generate(
+    pub(crate) fn generate(
         &self,
         node: &Node<'_>,
         candidates: &[u32],

@@ -16,40 +16,47 @@ use std::sync::Arc;
 pub const END: u8 = 1;
 pub const TIL: u8 = 3;
 const TOL: f64 = 1e-9;
-const CHUNK: usize = 32;
+const CHUNK: usize = 16;
 
-/// Up to `CHUNK` consecutive steps; the edges of its step j are
-/// `edge_off[j]..edge_off[j + 1]`.
+/// One step: what `stn.Step` holds, its snap code, and where its incoming edges end in
+/// its chunk's `edges`.
+#[derive(Clone, Copy)]
+struct Row {
+    kind: u8,
+    action: usize,
+    partner: i64,
+    low: f64,
+    high: f64,
+    code: usize,
+    /// The step's `Touches::folds` (the first six), here beside its code: a scan for
+    /// interfering steps reads these and looks a step's happening up only on a hit.
+    folds: [u64; 6],
+    edges_end: usize,
+}
+
+/// Up to `CHUNK` consecutive steps and their incoming edges, in two arrays (a copy of
+/// the last chunk, when a child appends to it, is two allocations).
 #[derive(Clone)]
 struct Chunk {
-    kinds: Vec<u8>,
-    partners: Vec<i64>,
-    highs: Vec<f64>,
-    codes: Vec<usize>,
-    /// Each step's `Touches::folds` (the first six), here beside its code: a scan for
-    /// interfering steps reads these and looks a step's happening up only on a hit.
-    folds: Vec<[u64; 6]>,
-    edge_off: Vec<usize>,
-    edge_src: Vec<usize>,
-    edge_w: Vec<f64>,
+    rows: Vec<Row>,
+    edges: Vec<(usize, f64)>,
 }
 
 impl Chunk {
     fn new() -> Self {
         Chunk {
-            kinds: Vec::with_capacity(CHUNK),
-            partners: Vec::with_capacity(CHUNK),
-            highs: Vec::with_capacity(CHUNK),
-            codes: Vec::with_capacity(CHUNK),
-            folds: Vec::with_capacity(CHUNK),
-            edge_off: vec![0],
-            edge_src: Vec::new(),
-            edge_w: Vec::new(),
+            rows: Vec::with_capacity(CHUNK),
+            edges: Vec::new(),
         }
     }
 
-    fn edges(&self, j: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        (self.edge_off[j]..self.edge_off[j + 1]).map(|e| (self.edge_src[e], self.edge_w[e]))
+    fn edges(&self, j: usize) -> &[(usize, f64)] {
+        let start = if j == 0 {
+            0
+        } else {
+            self.rows[j - 1].edges_end
+        };
+        &self.edges[start..self.rows[j].edges_end]
     }
 }
 
@@ -59,12 +66,19 @@ pub struct Schedule {
     chunks: Vec<Arc<Chunk>>,
     times: Vec<f64>,
     #[pyo3(get)]
-    span: f64,
+    pub(crate) span: f64,
 }
 
 /// The happenings certain to come after a step: `(start step, end snap code)` of each
 /// running action, `(time, snap code)` of each timed literal still to happen.
 pub(crate) type Coming = (Vec<(usize, usize)>, Vec<(f64, usize)>);
+
+/// `Coming` as `append` reads it.
+#[derive(Clone, Copy)]
+pub(crate) struct Future<'a> {
+    pub ends: &'a [(usize, usize)],
+    pub deadlines: &'a [(f64, usize)],
+}
 
 /// A running action's future end: its start step, its bound, the steps it must follow.
 struct Wait {
@@ -94,17 +108,18 @@ impl Schedule {
             .collect()
     }
 
-    /// `Timeline.extend`: the schedule with a step appended (its kind, partner, bounds
-    /// and snap code), or None if inconsistent. `future` (None: not checked) holds the
-    /// happenings certain to come: `(start step, end snap code)` of each running action,
-    /// `(time, snap code)` of each timed literal still to happen.
+    /// `Timeline.extend`: the schedule with a step appended (its kind, action, partner,
+    /// bounds and snap code), or None if inconsistent. `future` (None: not checked) holds
+    /// the happenings certain to come: `(start step, end snap code)` of each running
+    /// action, `(time, snap code)` of each timed literal still to happen.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (oracle, kind, partner, low, high, code, future, epsilon))]
+    #[pyo3(signature = (oracle, kind, action, partner, low, high, code, future, epsilon))]
     fn extend(
         &self,
         py: Python<'_>,
         oracle: &Interference,
         kind: u8,
+        action: usize,
         partner: i64,
         low: f64,
         high: f64,
@@ -124,20 +139,40 @@ impl Schedule {
                 "a step or happening is unknown to the schedule",
             ));
         }
+        let step = StepSpec {
+            kind,
+            action,
+            partner,
+            low,
+            high,
+            code,
+        };
         Ok(py.detach(|| {
             let snaps = oracle.snaps.read().expect("interference lock");
-            self.extended(
-                &snaps,
-                kind,
-                partner,
-                low,
-                high,
-                code,
-                future.as_ref(),
-                epsilon,
-            )
+            let mut out = self.clone();
+            let future = future
+                .as_ref()
+                .map(|(ends, deadlines)| Future { ends, deadlines });
+            out.append(&snaps, &step, future, epsilon).then_some(out)
         }))
     }
+
+    /// Each step's `(kind, action, partner, low, high)`, as `stn.Step` has them.
+    fn steps(&self) -> Vec<(u8, usize, i64, f64, f64)> {
+        (0..self.len()).map(|k| self.step(k)).collect()
+    }
+}
+
+/// A step to append: its kind, action (a timed literal's group), partner (-1: none),
+/// bounds and snap code.
+#[derive(Clone, Copy)]
+pub(crate) struct StepSpec {
+    pub kind: u8,
+    pub action: usize,
+    pub partner: i64,
+    pub low: f64,
+    pub high: f64,
+    pub code: usize,
 }
 
 impl Schedule {
@@ -149,14 +184,18 @@ impl Schedule {
         (&self.chunks[k / CHUNK], k % CHUNK)
     }
 
-    fn kind(&self, k: usize) -> u8 {
+    fn row(&self, k: usize) -> &Row {
         let (c, j) = self.chunk(k);
-        c.kinds[j]
+        &c.rows[j]
+    }
+
+    fn kind(&self, k: usize) -> u8 {
+        self.row(k).kind
     }
 
     fn edges_of(&self, k: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
         let (c, j) = self.chunk(k);
-        c.edges(j)
+        c.edges(j).iter().copied()
     }
 
     /// The steps (positions) that interfere with happening `with` (`stn._interfering`).
@@ -165,14 +204,15 @@ impl Schedule {
         let g = &b.folds;
         let mut out = Vec::new();
         for (i, chunk) in self.chunks.iter().enumerate() {
-            for (j, f) in chunk.folds.iter().enumerate() {
+            for (j, row) in chunk.rows.iter().enumerate() {
+                let f = &row.folds;
                 let maybe = (f[1] & g[0])
                     | (f[0] & g[1])
                     | (f[2] & g[3])
                     | (f[3] & g[2])
                     | (f[5] & g[6])
                     | (f[4] & g[5]);
-                if maybe != 0 && interferes(&snaps[chunk.codes[j]], b) {
+                if maybe != 0 && interferes(&snaps[row.code], b) {
                     out.push(i * CHUNK + j);
                 }
             }
@@ -180,65 +220,48 @@ impl Schedule {
         out
     }
 
+    /// Step k's `(kind, action, partner, low, high)`.
+    pub(crate) fn step(&self, k: usize) -> (u8, usize, i64, f64, f64) {
+        let r = self.row(k);
+        (r.kind, r.action, r.partner, r.low, r.high)
+    }
+
     /// Append a step (its time not yet set).
-    fn push(
-        &mut self,
-        snap: &Touches,
-        kind: u8,
-        partner: i64,
-        high: f64,
-        code: usize,
-        incoming: &[(usize, f64)],
-    ) {
+    fn push(&mut self, snap: &Touches, step: &StepSpec, incoming: &[(usize, f64)]) {
         if self.len().is_multiple_of(CHUNK) {
             self.chunks.push(Arc::new(Chunk::new()));
         }
         let chunk = Arc::make_mut(self.chunks.last_mut().expect("a chunk"));
-        chunk.kinds.push(kind);
-        chunk.partners.push(partner);
-        chunk.highs.push(high);
-        chunk.codes.push(code);
+        chunk.edges.extend_from_slice(incoming);
         let f = &snap.folds;
-        chunk.folds.push([f[0], f[1], f[2], f[3], f[4], f[5]]);
-        for &(i, w) in incoming {
-            chunk.edge_src.push(i);
-            chunk.edge_w.push(w);
-        }
-        chunk.edge_off.push(chunk.edge_src.len());
+        chunk.rows.push(Row {
+            kind: step.kind,
+            action: step.action,
+            partner: step.partner,
+            low: step.low,
+            high: step.high,
+            code: step.code,
+            folds: [f[0], f[1], f[2], f[3], f[4], f[5]],
+            edges_end: chunk.edges.len(),
+        });
     }
 
-    /// `Timeline.extend`: the schedule with a step appended (None: inconsistent).
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn extended(
-        &self,
-        snaps: &[Touches],
-        kind: u8,
-        partner: i64,
-        low: f64,
-        high: f64,
-        code: usize,
-        future: Option<&Coming>,
-        eps: f64,
-    ) -> Option<Schedule> {
-        let mut out = self.clone();
-        out.append(snaps, kind, partner, low, high, code, future, eps)
-            .then_some(out)
-    }
-
-    /// `extended` in place (several steps appended copy the schedule once): false when
-    /// inconsistent, the schedule then half extended (to be dropped).
-    #[allow(clippy::too_many_arguments)]
+    /// `Timeline.extend` in place (several steps appended copy the schedule once): false
+    /// when inconsistent, the schedule then half extended (to be dropped).
     pub(crate) fn append(
         &mut self,
         snaps: &[Touches],
-        kind: u8,
-        partner: i64,
-        low: f64,
-        high: f64,
-        code: usize,
-        future: Option<&Coming>,
+        step: &StepSpec,
+        future: Option<Future<'_>>,
         eps: f64,
     ) -> bool {
+        let StepSpec {
+            kind,
+            partner,
+            low,
+            code,
+            ..
+        } = *step;
         let n = self.len();
         let mut incoming: Vec<(usize, f64)> = self
             .interfering(snaps, code)
@@ -248,7 +271,7 @@ impl Schedule {
         if kind == END {
             incoming.push((partner as usize, low));
         }
-        self.push(&snaps[code], kind, partner, high, code, &incoming);
+        self.push(&snaps[code], step, &incoming);
         // `Timeline._base`
         let mut value = if kind == TIL { low } else { 0.0 };
         for &(i, w) in &incoming {
@@ -258,10 +281,9 @@ impl Schedule {
         }
         self.times.push(value);
         let mut waits = Vec::new();
-        if let Some((ends, _)) = future {
+        if let Some(Future { ends, .. }) = future {
             for &(start, end_code) in ends {
-                let (c, j) = self.chunk(start);
-                let bound = c.highs[j];
+                let bound = self.row(start).high;
                 if bound == f64::INFINITY {
                     continue;
                 }
@@ -282,7 +304,7 @@ impl Schedule {
         let Some(touched) = self.settle(n, &waits, eps) else {
             return false;
         };
-        if let Some((_, deadlines)) = future {
+        if let Some(Future { deadlines, .. }) = future {
             for &(when, snap) in deadlines {
                 let late = self
                     .interfering(snaps, snap)
@@ -321,7 +343,7 @@ impl Schedule {
             for k in first..n {
                 let (c, j) = (&self.chunks[k / CHUNK], k % CHUNK);
                 let mut value = self.times[k];
-                for (i, w) in c.edges(j) {
+                for &(i, w) in c.edges(j) {
                     if self.times[i] + w > value {
                         value = self.times[i] + w;
                     }
@@ -330,15 +352,15 @@ impl Schedule {
             }
             let mut lowest = n;
             for k in touched..n {
-                let (c, j) = (&self.chunks[k / CHUNK], k % CHUNK);
-                if c.kinds[j] == TIL {
-                    if self.times[k] > c.highs[j] + TOL {
+                let r = &self.chunks[k / CHUNK].rows[k % CHUNK];
+                if r.kind == TIL {
+                    if self.times[k] > r.high + TOL {
                         return None;
                     }
-                } else if c.kinds[j] == END {
-                    let p = c.partners[j] as usize;
-                    if self.times[k] - self.times[p] > c.highs[j] + TOL {
-                        self.times[p] = self.times[k] - c.highs[j];
+                } else if r.kind == END {
+                    let p = r.partner as usize;
+                    if self.times[k] - self.times[p] > r.high + TOL {
+                        self.times[p] = self.times[k] - r.high;
                         lowest = lowest.min(p);
                     }
                 }

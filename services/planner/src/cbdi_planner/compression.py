@@ -15,13 +15,41 @@ with another action's help, so it also needs concurrency.
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 from cbdi_planner.task import GroundAction, Task
 
 __all__ = ["needs_concurrency"]
 
 
 def needs_concurrency(task: Task) -> bool:
-    """Tell whether some plan of `task` may require overlapping actions."""
+    """Tell whether some plan of `task` may require overlapping actions.
+
+    A function of the actions alone, so told once per grounding: a planner searches
+    many tasks of the same actions (one per request and epoch), and on a small map
+    this costs as much as the search.
+    """
+    key = id(task.actions)
+    with _LOCK:
+        found = _TOLD.get(key)
+        if found is not None and found[1] is task.actions:
+            _TOLD.move_to_end(key)
+            return found[0]
+    told = _needs_concurrency(task)
+    with _LOCK:
+        _TOLD[key] = (told, task.actions)  # the entry holds what the key's id names
+        while len(_TOLD) > TOLD:
+            _TOLD.popitem(last=False)
+    return told
+
+
+TOLD = 8  # groundings remembered (least recently used forgotten first)
+_TOLD: OrderedDict[int, tuple[bool, object]] = OrderedDict()
+_LOCK = threading.Lock()
+
+
+def _needs_concurrency(task: Task) -> bool:
     temp_true = temp_false = temp_num = 0
     for action in task.actions:
         end = action.end

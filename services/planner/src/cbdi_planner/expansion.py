@@ -13,10 +13,10 @@ from typing import Any
 
 from cbdi_planner.core import compiled
 from cbdi_planner.heuristic import INFINITE, RelaxedPlanGraph
-from cbdi_planner.moves import CompiledMoves, til_snaps
+from cbdi_planner.moves import CompiledMoves, goal_of, til_snaps
 from cbdi_planner.state import State, apply_end, apply_start, apply_til, is_goal
 from cbdi_planner.stn import END, INST, START, TIL, Future, Oracle, Step, Timeline
-from cbdi_planner.task import Task
+from cbdi_planner.task import Task, bit_positions
 
 __all__ = ["Expander", "Move", "Node", "Successor", "needs"]
 
@@ -35,6 +35,9 @@ class Node:
     h: int
     helpful: frozenset[tuple[int, int]]
     h_time: float = 0.0
+    # The compiled core's node (`cbdi_planner_core.SearchNode`; None: the Python core's),
+    # which its search loops start from.
+    handle: Any = field(default=None, compare=False)
 
     @property
     def makespan(self) -> float:
@@ -104,9 +107,17 @@ class Expander:
         self._oracle: Oracle | None = None
         self._needs: list[int] = []
         self._by_fact: dict[int, list[int]] = {}
+        # Compiled: its nodes and search loops (`loops`), this expander's aim and counts.
+        self.native: Any = None
+        # The steps of the nodes made from handles, by what they are: a continual
+        # search's rounds return plans that share their first steps.
+        self._steps: dict[tuple[int, int, int, float, float], Step] = {}
         if self._compiled is not None:
             self._oracle = self._compiled.oracle
             self._til_snaps = list(self._compiled.tils)
+            self.native = module.Search(  # type: ignore[union-attr]
+                self._compiled.core, self.rpg.core, goal_of(task), compress, epsilon
+            )
             return
         self._til_snaps = til_snaps(task)
         self._needs = needs(task)
@@ -117,16 +128,59 @@ class Expander:
             low = (need & -need).bit_length() - 1
             self._by_fact.setdefault(low, []).append(action.index)
 
+    @property
+    def oracle(self) -> Oracle | None:
+        """Return the compiled core's snap codes (None: the Python core's timelines)."""
+        return self._oracle
+
     def root(self, state: State) -> Node:
         """Return the node of `state` with an empty plan (no running actions allowed)."""
         if state.open:
             raise ValueError("a search root cannot have running actions")
+        if self.native is not None:
+            facts = state.facts
+            packed = facts.to_bytes((facts.bit_length() + 7) // 8, "little")
+            return self.node_of(self.native.root(packed, state.nums, state.til))
         return self.evaluate(state, Timeline.start(self.epsilon, self._oracle), ())
+
+    def reevaluate(self, node: Node) -> Node:
+        """Return `node` evaluated again (under the current aim)."""
+        if node.handle is not None and self.native is not None:
+            return self.node_of(self.native.reevaluate(node.handle))
+        return self.evaluate(node.state, node.timeline, node.running)
+
+    def node_of(self, handle: Any) -> Node:
+        """Return the node of a compiled core's handle (and count what it did)."""
+        self.sync()
+        compiled = self._compiled
+        assert compiled is not None
+        facts, nums, open_, til, running, h, helpful, h_time, net, placed = handle.view()
+        made, snaps = self._steps, compiled.snaps
+        steps = []
+        for row in placed:  # (kind, action, partner, low, high)
+            step = made.get(row)
+            if step is None:
+                kind, action, partner, low, high = row
+                step = made[row] = Step(kind, action, snaps[kind][action], partner, low, high)
+            steps.append(step)
+        timeline = Timeline(tuple(steps), net, self.epsilon, net.span, compiled.oracle)
+        state = State(int.from_bytes(facts, "little"), nums, open_, til)
+        return Node(state, timeline, running, h, frozenset(helpful), h_time, handle)
+
+    def sync(self) -> None:
+        """Count what the compiled core did since the last call."""
+        if self.native is not None:
+            generated, evaluated, inconsistent = self.native.take_counts()
+            self.generated += generated
+            self.evaluated += evaluated
+            self.inconsistent += inconsistent
 
     def aim(self, subgoal: int | None) -> None:
         """Search for the facts `subgoal` only (a stage of a goal agenda); None: the goal."""
         self.subgoal = subgoal
         self.rpg.aim(self.task.goal if subgoal is None else subgoal)
+        if self.native is not None:
+            self.native.aim(None if subgoal is None else list(bit_positions(subgoal)))
 
     def reached(self, state: State) -> bool:
         """Tell whether `state` is a goal of the current aim (no action may still run)."""

@@ -183,6 +183,11 @@ class RelaxedPlanGraph:
         module = compiled(core)
         self._core = module.Graph(self) if module is not None else None
 
+    @property
+    def core(self) -> object:
+        """Return the compiled core's graph (None: the Python core explores)."""
+        return self._core
+
     _built: OrderedDict[tuple[object, ...], tuple[RelaxedPlanGraph, object]] = OrderedDict()
     _building = threading.Lock()
 

@@ -20,7 +20,7 @@ from typing import Any
 from cbdi_planner.stn import Oracle
 from cbdi_planner.task import CondEffect, NumAssign, NumCond, Snap, Task, bit_positions
 
-__all__ = ["CompiledMoves", "til_snaps"]
+__all__ = ["CompiledMoves", "goal_of", "til_snaps"]
 
 BUILT = 8  # tasks kept (least recently used forgotten first)
 
@@ -28,6 +28,11 @@ BUILT = 8  # tasks kept (least recently used forgotten first)
 def til_snaps(task: Task) -> list[Snap]:
     """The happening of each group of timed literals (it reads what it writes)."""
     return [Snap(0, 0, (), t.add, t.dele, (), (), 0, t.add | t.dele, 0, 0) for t in task.tils]
+
+
+def goal_of(task: Task) -> tuple[object, ...]:
+    """The task's goal as the compiled core takes a conjunction."""
+    return _conj(task.goal, task.goal_neg, task.goal_num)
 
 
 def _conj(pre: int, neg: int, num: tuple[NumCond, ...]) -> tuple[object, ...]:

@@ -18,6 +18,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+from cbdi_planner import loops
 from cbdi_planner.compression import needs_concurrency
 from cbdi_planner.errors import SearchTimeout
 from cbdi_planner.expansion import Expander, Move, Node
@@ -88,6 +89,23 @@ class _Clock:
         if seconds is not None and self.now() - self.started > seconds:
             raise SearchTimeout(f"time budget of {seconds} s exhausted")
 
+    def allowance(self) -> tuple[bool, int | None]:
+        """Return whether a compiled loop may count the expansions itself (this clock
+        only counts them), and how many more it may make (None: unlimited)."""
+        native = (
+            type(self).tick is _Clock.tick
+            and self.budget.pace is None
+            and self.budget.max_seconds is None
+        )
+        limit = self.budget.max_expansions
+        return native, None if limit is None or not native else limit - self.stats.expanded
+
+    def counted(self, expansions: int, ran_out: bool) -> None:
+        """Count expansions a compiled loop made; SearchTimeout if its allowance ran out."""
+        self.stats.expanded += expansions
+        if ran_out:
+            raise SearchTimeout(f"expansion budget of {self.budget.max_expansions} exhausted")
+
     def elapsed(self) -> float:
         return self.now() - self.started
 
@@ -101,6 +119,8 @@ def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | No
     goal node, or None when a plateau cannot be escaped (the caller may fall back to
     best-first search).
     """
+    if loops.runs(ex, root):
+        return loops.hill_climb(ex, root, clock)
     current = root
     while not ex.reached(current.state):
         better = _climb(ex, current, clock, helpful_only=True)
@@ -163,6 +183,8 @@ def best_first(
     after h improves (Fast Downward's boosted dual queue): helpful actions lead the
     way, the full list keeps the search complete.
     """
+    if loops.runs(ex, root):
+        return loops.best_first(ex, root, clock, bound, limit)
     lists: tuple[list[_Lazy], list[_Lazy]] = ([(root.h, 0, 0, root, None)], [])
     closed: set[object] = set()
     counter, turn, boost, best_h = 0, 0, 0, root.h
@@ -355,7 +377,7 @@ def goal_agenda(ex: Expander, root: Node, clock: _Clock) -> Node | None:
     try:
         while node is not None and not is_goal(ex.task, node.state):
             ex.aim(agenda_stage(ex, node.state))
-            start = ex.evaluate(node.state, node.timeline, node.running)
+            start = ex.reevaluate(node)
             node = None if ex.dead(start) else enforced_hill_climbing(ex, start, clock)
         return node
     finally:

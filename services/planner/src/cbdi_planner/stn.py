@@ -187,7 +187,15 @@ class Timeline:
             )
         code = oracle.code(step.snap)
         net = self.net.extend(
-            oracle.core, step.kind, step.partner, step.low, step.high, code, coming, self.epsilon
+            oracle.core,
+            step.kind,
+            step.action,
+            step.partner,
+            step.low,
+            step.high,
+            code,
+            coming,
+            self.epsilon,
         )
         if net is None:
             return None

@@ -23,7 +23,9 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
+from cbdi_planner.core import compiled
 from cbdi_planner.expansion import Expander, Node
 from cbdi_planner.search import agenda_stage
 from cbdi_planner.state import State, is_goal
@@ -106,6 +108,12 @@ class SearchSpace:
         self.expanded = 0
         self.best = self.root  # the round's best state so far
         self._push(self.root)
+        # The compiled core's lists (`cbdi_planner_core.Rounds`), when it runs: a round
+        # is then one call, and the lists above stay empty.
+        self._native: Any = None
+        module = compiled()
+        if self.expander.native is not None and module is not None:
+            self._native = module.Rounds(self.expander.native, self.root.handle, mode, agenda)
 
     def _push(self, node: Node) -> None:
         if self.mode == G:
@@ -131,6 +139,8 @@ class SearchSpace:
 
     def search_round(self, bound: RoundBound) -> Round:
         """Run Algorithm 1 from the root until the goal, a bound, or an empty open list."""
+        if self._native is not None:
+            return self._native_round(bound)
         started, expanded = self.now(), 0
         self.best = self.root  # line 1
         if self.expander.dead(self.root):
@@ -156,6 +166,30 @@ class SearchSpace:
         if self.best is not self.root:
             return self._done("best", self.best, expanded, started)
         return self._done("exhausted", None, expanded, started)  # line 16
+
+    def _native_round(self, bound: RoundBound) -> Round:
+        """`search_round` by the compiled core, in one call."""
+        started = self.now()
+        timed = self.now if bound.seconds is not None else None
+        try:
+            kind, handle, is_root, expanded, best_h = self._native.search_round(
+                bound.seconds, bound.expansions, bound.plan_size, timed, started
+            )
+        finally:
+            self.expander.sync()
+            self._sync_aim()
+        node = None
+        if handle is not None:
+            node = self.root if is_root else self.expander.node_of(handle)
+        self.expanded += expanded
+        return Round(kind, node, expanded, self.now() - started, best_h)
+
+    def _sync_aim(self) -> None:
+        """Let the expander aim where the compiled core's rounds aim."""
+        stage = self.expander.native.subgoal
+        aim = None if stage is None else sum(1 << f for f in stage)
+        if aim != self.expander.subgoal:
+            self.expander.aim(aim)
 
     def _aim_at(self, state: State) -> None:
         """Aim the heuristic at the agenda's next stage from `state` (greedy mode with an
@@ -215,6 +249,10 @@ class SearchSpace:
         """Alg. 2 line 19: root the search at `node` (a state with no running action)."""
         if node.running:
             raise ValueError("cannot re-root on a state with running actions")
+        if self._native is not None:
+            self._native.reroot(node.handle)
+            self.root, self.root_steps = node, len(node.timeline.steps)
+            return
         prefix = node.timeline.steps
 
         def extends(n: Node) -> bool:
@@ -235,6 +273,12 @@ class SearchSpace:
     def restart(self, mode: str, root: Node) -> None:
         """Search again in `mode` from `root` (a node of this space) with empty lists."""
         self.mode = mode
+        if self._native is not None:
+            root = self.expander.node_of(self._native.restart(mode, root.handle))
+            self._sync_aim()
+            self.root, self.current = root, root
+            self.root_steps = len(root.timeline.steps)
+            return
         self._aim_at(root.state)
         root = self.expander.evaluate(root.state, root.timeline, root.running)
         self.root, self.current = root, root
