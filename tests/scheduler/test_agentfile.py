@@ -28,6 +28,11 @@ def test_literals_and_beliefs_read_the_pddl_way() -> None:
     for bad in ["(free c", "free c)", "", "(= (f) x)", "(exists x plastic)"]:
         with pytest.raises(LiteralSyntaxError):
             parse_literal(bad) if "exists" in bad else parse_belief(bad)
+    for bad in ["( (holding r *))", "((<) (f) 3)", "((not) (f))"]:  # a list where a word goes
+        with pytest.raises(LiteralSyntaxError):
+            parse_literal(bad)
+        with pytest.raises(LiteralSyntaxError):
+            parse_belief(bad)
 
 
 def test_the_recycler_is_the_papers_plastic_agent() -> None:

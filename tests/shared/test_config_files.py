@@ -155,16 +155,19 @@ def damaged(data: bytes, rng: random.Random) -> bytes:
 
 @pytest.mark.parametrize("kind", sorted(LOADERS))
 def test_damaged_shipped_files_load_or_give_a_named_error(kind: str, tmp_path: Path) -> None:
+    """The files keep their relative paths (the domain and the map are copied beside
+    them), so the damage is the same wherever the project is checked out."""
     original, load = LOADERS[kind]
     data = original.read_bytes()
-    if kind == "agent":
-        data = data.replace(b'"../pddl/domain.pddl"', f'"{DOMAIN}"'.encode())
-    if kind == "scenario":
-        data = data.replace(b'"../maps/', f'"{MAP.parent}/'.encode())
+    for folder in ("pddl", "maps", "agents"):
+        (tmp_path / folder).mkdir()
+    for source in (DOMAIN, MAP, AGENT):
+        (tmp_path / source.parent.name / source.name).write_bytes(source.read_bytes())
     rng = random.Random(f"config:{kind}")
-    path = tmp_path / original.name
+    (tmp_path / "files").mkdir()
+    path = tmp_path / "files" / original.name
     errors = 0
-    for _ in range(150):
+    for _ in range(400):
         path.write_bytes(damaged(data, rng))
         try:
             load(path)

@@ -92,7 +92,7 @@ def parse_literal(text: str) -> Literal:
         if len(tree) != 4 or tree[2] != "-" or not all(isinstance(t, str) for t in tree[1:]):
             raise LiteralSyntaxError(f"{text!r}: expected (exists NAME - TYPE)")
         return Literal("EX", instance(str(tree[1]), str(tree[3])))
-    if tree and tree[0] in _OPS and len(tree) == 3:
+    if tree and isinstance(tree[0], str) and tree[0] in _OPS and len(tree) == 3:
         name, args = _atom(tree[1], text)
         return Literal(_OPS[str(tree[0])], fluent(name, *args, value=0.0), _number(tree[2], text))
     name, args = _atom(tree, text)
