@@ -162,6 +162,7 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
     assert summary["result"] == "done" and summary["stats"]["litter_recycled"] == 3
     frozen = {s: n for s, n in summary["freezes"].items() if n}
     assert frozen == {"robot1/planner": 1}
+    assert {s: n for s, n in summary["freeze_kills"].items() if n} == {"robot1/planner": 1}
     inspected = subprocess.run(
         [CBDI, "inspect", str(record), "--json"], capture_output=True, text=True, cwd=REPO
     )

@@ -29,6 +29,10 @@ def test_corridor_run_ends_done_with_json_summary() -> None:
     assert summary["restarts"] == {"router": 0, "world": 0, "robot1/executor": 0}
     assert summary["planner"]["agents"] == {}  # a scripted robot has no planner
     assert summary["planner"]["total"]["replans"] == 0
+    assert set(summary["freezes"]) == set(summary["freeze_kills"]) == set(summary["restarts"])
+    memory = summary["memory"]  # three Python processes hold tens of MB each, at least
+    assert memory["samples"] >= 1 and memory["peak_total_mb"] > 30
+    assert set(memory["peak_mb"]) <= set(summary["restarts"])
 
 
 def test_several_agents_share_one_world() -> None:

@@ -354,6 +354,12 @@ def _report(summary: RunSummary, as_json: bool) -> None:
             f"{late['max']}; {late['over']} of {late['epochs']} over {late['bound']}",
             file=sys.stderr,
         )
+    frozen = {s: n for s, n in summary.freezes.items() if n}
+    if frozen:
+        killed = {s: n for s, n in summary.freeze_kills.items() if n}
+        print(f"  frozen (reported): {frozen}; killed: {killed or 'none'}", file=sys.stderr)
+    if summary.memory:
+        print(f"  memory: peak {summary.memory['peak_total_mb']} MB in all", file=sys.stderr)
     for name, counts in summary.stats.get("agents", {}).items():
         text = " ".join(f"{k}={v}" for k, v in counts.items() if v)  # what happened
         acts = summary.actions.get(name)

@@ -95,7 +95,9 @@ class ManagedProcess:
         self.stall_file = stall_file
         self.proc: asyncio.subprocess.Process | None = None
         self.restarts = 0
-        self.freezes = 0
+        self.freezes = 0  # times one of its processes was judged frozen (reported)
+        self.freeze_kills = 0  # times one was killed for it
+        self._frozen: set[int] = set()  # the pids judged frozen
         self.starved = 0  # times its loop stood for want of CPU (reported, not killed)
         self.exit_codes: list[int] = []
         self.tail: deque[str] = deque(maxlen=20)
@@ -141,13 +143,20 @@ class ManagedProcess:
             self.tail.append(text)
             self.sink(self.spec.service, text)
 
+    def frozen(self, pid: int) -> None:
+        """Count process `pid` judged frozen (once per process, reported or killed)."""
+        if pid not in self._frozen:
+            self._frozen.add(pid)
+            self.freezes += 1
+
     def kill_frozen(self, pid: int) -> bool:
         """Kill process `pid` if it is still the current one (SIGKILL: a stopped process
         cannot handle SIGTERM); `supervise` then restarts it by policy."""
         proc = self.proc
         if proc is None or proc.pid != pid or proc.returncode is not None or self.stopping:
             return False
-        self.freezes += 1
+        self.frozen(pid)
+        self.freeze_kills += 1
         with contextlib.suppress(ProcessLookupError):
             proc.kill()
         return True

@@ -36,6 +36,7 @@ from cbdi.bus.base import Bus
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
+from cbdi.launcher.memory import MemoryPeaks, watch_memory
 from cbdi.launcher.ports import free_port
 from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario, agent_groups
@@ -175,10 +176,12 @@ async def _launch(
     ]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
+    memory = MemoryPeaks()
     started = time.monotonic()
     bus: Bus | None = None
     try:
         async with asyncio.TaskGroup() as tg:
+            tg.create_task(watch_memory(procs, memory))
             launched = RunLaunched(
                 scenario=scenario.name,
                 services={
@@ -208,9 +211,11 @@ async def _launch(
         shutil.rmtree(state_dir, ignore_errors=True)
     summary.wall_time = round(time.monotonic() - started, 3)
     summary.planner = planners.summary()
+    summary.memory = memory.summary()
     for proc in procs:
         summary.restarts[proc.spec.service] = proc.restarts
         summary.freezes[proc.spec.service] = proc.freezes
+        summary.freeze_kills[proc.spec.service] = proc.freeze_kills
         summary.starved[proc.spec.service] = proc.starved
         summary.exit_codes[proc.spec.service] = proc.exit_codes
     return summary

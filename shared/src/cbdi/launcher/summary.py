@@ -31,7 +31,9 @@ class RunSummary:
     wall_time: float = 0.0
     stats: dict[str, Any] = field(default_factory=dict)
     restarts: dict[str, int] = field(default_factory=dict)
-    freezes: dict[str, int] = field(default_factory=dict)  # processes killed as frozen
+    # times a process was judged frozen (silent past --freeze-limit, not starved): reported
+    freezes: dict[str, int] = field(default_factory=dict)
+    freeze_kills: dict[str, int] = field(default_factory=dict)  # of those, killed (--freeze-kill)
     # times a process's loop stood for want of CPU: reported, not killed (slow, not frozen)
     starved: dict[str, int] = field(default_factory=dict)
     exit_codes: dict[str, list[int]] = field(default_factory=dict)
@@ -47,6 +49,9 @@ class RunSummary:
     # Paced runs: how late the world had its epochs out, in wall seconds (`EpochLateness`:
     # epochs, median, p95, max, and `over` the `bound` of a tenth of an epoch).
     lateness: dict[str, float | int] | None = None
+    # The processes' resident sets, sampled while the run ran (`cbdi.launcher.memory`):
+    # the peak of their sum, each service's peak (MB), the number of samples.
+    memory: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:

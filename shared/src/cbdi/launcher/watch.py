@@ -158,6 +158,8 @@ async def _act(bus: Bus, dog: Watchdog, proc: ManagedProcess, frozen: Frozen | S
             return
     elif not proc.running or proc.pid != frozen.pid:
         return
+    else:
+        proc.frozen(frozen.pid)
     action = "kill" if frozen.kill else "report"
     limit = dog.kill_after if frozen.kill else dog.limit
     proc.sink(
