@@ -8,6 +8,7 @@ import time
 import pytest
 
 from cbdi.bus import BusConfig, open_bus
+from cbdi.bus.zenoh_bus import RECOVERY_PERIOD
 from cbdi.errors import ConfigError, RequestTimeoutError
 from tests_support import free_port
 
@@ -127,7 +128,7 @@ async def test_what_is_published_while_the_router_is_down_arrives_after_its_rest
         assert got == list(range(20))
         late = b.subscribe("cbdi/test/**")
         past = b.subscribe("cbdi/test/**", history=True)
-        await asyncio.sleep(1.5)  # a recovery period or three
+        await asyncio.sleep(1.5 * RECOVERY_PERIOD.total_seconds())  # its queries came
         await a.publish("cbdi/test/x", bytes([20]), block=True)
         assert (await asyncio.wait_for(anext(aiter(late)), 10)).payload[0] == 20
         history = [(await asyncio.wait_for(anext(aiter(past)), 10)).payload[0] for _ in range(21)]
