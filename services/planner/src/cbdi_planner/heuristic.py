@@ -27,7 +27,7 @@ __all__ = ["INFINITE", "Estimate", "RelaxedPlanGraph"]
 
 INFINITE = 1 << 30
 KNOWN = 4096  # estimates remembered (oldest forgotten first): a few MB on a 30x30 map
-BUILT = 8  # graphs kept for `RelaxedPlanGraph.of` (least recently used forgotten first)
+BUILT = 3  # graphs kept for `RelaxedPlanGraph.of` (LRU; campus-30x30: some 10 MB each)
 
 
 @dataclass(frozen=True, slots=True)

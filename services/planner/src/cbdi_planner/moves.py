@@ -22,7 +22,7 @@ from cbdi_planner.task import CondEffect, NumAssign, NumCond, Snap, Task, bit_po
 
 __all__ = ["CompiledMoves", "goal_of", "til_snaps"]
 
-BUILT = 8  # tasks kept (least recently used forgotten first)
+BUILT = 3  # tasks kept (least recently used first out; campus-30x30: some 10 MB each)
 
 
 def til_snaps(task: Task) -> list[Snap]:
