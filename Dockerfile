@@ -35,7 +35,7 @@ RUN . /tmp/build-env/env.sh \
 
 FROM ${BASE_IMAGE}
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 PATH=/opt/venv/bin:$PATH \
-    CBDI_DOMAINS=/opt/cbdi/domains
+    CBDI_DOMAINS=/opt/cbdi/domains MALLOC_ARENA_MAX=2
 COPY --from=build /opt/venv /opt/venv
 COPY domains /opt/cbdi/domains
 WORKDIR /opt/cbdi

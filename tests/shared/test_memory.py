@@ -6,6 +6,8 @@ from __future__ import annotations
 import asyncio
 import sys
 
+import pytest
+
 from cbdi.launcher.memory import MemoryPeaks, resident_bytes, watch_memory
 from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 
@@ -65,3 +67,29 @@ def test_a_frozen_process_counts_once_reported_then_killed() -> None:
     proc.frozen(41)  # the kill of the same process after its report
     proc.frozen(42)  # its restart, frozen too
     assert proc.freezes == 2 and proc.freeze_kills == 0
+
+
+def test_services_run_with_two_malloc_arenas_unless_told_otherwise(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    async def arenas() -> str:
+        said: list[str] = []
+        code = "import os; print(os.environ['MALLOC_ARENA_MAX'])"
+        proc = ManagedProcess(
+            ProcessSpec("x", (sys.executable, "-c", code)),
+            RestartPolicy("never"),
+            lambda who, line: said.append(line),
+        )
+        await proc.start()
+        assert proc.proc is not None
+        await proc.proc.wait()
+        for _ in range(300):  # the output pump may still be reading
+            if len(said) > 1:
+                break
+            await asyncio.sleep(0.01)
+        return said[-1]  # after the launcher's `started` line
+
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    assert asyncio.run(arenas()) == "2"
+    monkeypatch.setenv("MALLOC_ARENA_MAX", "8")
+    assert asyncio.run(arenas()) == "8"
