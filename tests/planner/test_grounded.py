@@ -6,7 +6,7 @@ import itertools
 import random
 from pathlib import Path
 
-from cbdi.beliefs import BeliefSet
+from cbdi.beliefs import BeliefSet, fact
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.problem import problem_from_beliefs
 from cbdi_planner.agent.transient import Transients
@@ -145,3 +145,30 @@ def test_a_task_aimed_at_another_goal_is_the_fresh_grounding_of_that_goal() -> N
         assert "can never hold" in str(exc)
     else:
         raise AssertionError("a goal that can never hold was not told")
+
+
+def test_another_robots_recycled_item_grounds_nothing_anew() -> None:
+    """`recycled` is read by no action's condition: another robot's item, picked up
+    (so out of reach here) and then recycled, leaves the grounding as it was, and the
+    task is the fresh grounding's but for that fact. A goal that names such a fact
+    grounds anew (and holds at once)."""
+    picked = beliefs(litter=2)
+    picked = BeliefSet(
+        instances=picked.instances,
+        facts=picked.facts - {("litter_pose", "p1", "c_3_3")},
+        fluents=picked.fluents,
+    )
+    g = seen(picked)
+    first = g.task(picked, [["recycled", "p2"]])
+    done = picked.adding([fact("recycled", "p1")])
+    task = g.task(done, [["recycled", "p2"]])
+    assert (g.grounded, task.actions) == (1, first.actions)
+    fresh = ground(DOMAIN, problem_from_beliefs(DOMAIN, done, [["recycled", "p2"]]))
+    assert set(fresh.fact_names(fresh.init_facts)) - set(task.fact_names(task.init_facts)) == {
+        "(recycled p1)"
+    }
+    assert {a.name for a in fresh.actions} == {a.name for a in task.actions}
+    found = search(task, strategy="ff", budget=Budget(max_expansions=5000))
+    assert found.plan is not None and simulate(fresh, Plan(found.plan.actions)).ok
+    again = g.task(done, [["recycled", "p1"]])  # a goal on the fact itself: grounded anew
+    assert g.grounded == 2 and again.init_facts & again.goal == again.goal

@@ -18,6 +18,13 @@ the initial state, so the task holds every action a task grounded from the curre
 beliefs alone would; the extra ones cannot start from the current state, and neither the
 search nor its heuristic ever uses them. What grounding alone told (the goal unreachable
 from these beliefs) `reaches_goal` tells from the relaxed planning graph.
+
+A fact of a predicate that no action's condition reads (`inert`: the recycling domain's
+`recycled`, which only effects make) enables nothing, so it never calls for grounding
+anew: one the grounding reached is kept in the initial state, one it never numbered is
+left out (a goal that needs it is aimed at anew, and that grounds). On campus-30x30 a
+third of the groundings were for another robot's `(recycled ...)`, an item this one
+could no longer reach.
 """
 
 from __future__ import annotations
@@ -32,12 +39,23 @@ from cbdi_planner.agent.transient import Transients
 from cbdi_planner.errors import Unsolvable
 from cbdi_planner.grounding import Grounding, grounding, static_functions
 from cbdi_planner.heuristic import RelaxedPlanGraph
-from cbdi_planner.pddl.ast import Domain, Problem
+from cbdi_planner.pddl.ast import (
+    Cond,
+    Domain,
+    Effect,
+    ExistsCond,
+    ForallCond,
+    ForallEffect,
+    Lit,
+    OrCond,
+    Problem,
+    WhenEffect,
+)
 from cbdi_planner.reachability import fluent_predicates
 from cbdi_planner.state import State, initial_state
 from cbdi_planner.task import Task
 
-__all__ = ["Groundings", "reaches_goal"]
+__all__ = ["Groundings", "condition_predicates", "reaches_goal"]
 
 Key = tuple[object, ...]
 _NO_PROBLEM = Problem(name="", domain_name="", objects={}, init=[], init_numeric={}, goal=())
@@ -62,6 +80,7 @@ class Groundings:
         self.statics = frozenset(static_functions(domain))
         # Beliefs have no timed literals: the fluent predicates are the domain's.
         self.fluent = frozenset(fluent_predicates(domain, _NO_PROBLEM))
+        self.inert = self.fluent - condition_predicates(domain)
         self._cached: _Cached | None = None
         self._last: tuple[BeliefSet, tuple[tuple[str, ...], ...], Task] | None = None
         self.grounded = 0
@@ -88,7 +107,7 @@ class Groundings:
             g = grounding(self.domain, self._superset(beliefs, goal, problem))
             self._cached = _Cached(key, g, wanted)
             self.grounded += 1
-            task = _with_init(g, fluent_facts, values)
+            task = _with_init(g, fluent_facts, values, self.inert, wanted)
             assert task is not None, "a task grounded from a superset reaches its subset"
         self._last = (beliefs, wanted, task)
         return task
@@ -126,7 +145,7 @@ class Groundings:
     ) -> Task | None:
         """The cached task from these facts and values, aiming at `goal`; None if it
         does not serve (a fact it never reaches, a goal it cannot aim at)."""
-        task = _with_init(cached.grounding, facts, values)
+        task = _with_init(cached.grounding, facts, values, self.inert, goal)
         if task is None or cached.goal == goal:
             return task
         return cached.grounding.aimed(task, goal_conditions(self.domain, goal))
@@ -170,23 +189,64 @@ class Groundings:
         return problem_from_beliefs(self.domain, beliefs.adding(extra), goal)
 
 
-def _with_init(g: Grounding, facts: list[Atom], values: dict[Atom, float]) -> Task | None:
+def _with_init(
+    g: Grounding,
+    facts: list[Atom],
+    values: dict[Atom, float],
+    inert: frozenset[str],
+    goal: tuple[tuple[str, ...], ...],
+) -> Task | None:
     """Return `g`'s task from the initial state of these fluent `facts` and function
     `values`, or None if it holds a fact the grounding never reaches (a task grounded
-    from it may have more actions)."""
+    from it may have more actions) that some action's condition or `goal` reads."""
     index = g.fact_index
     mask = 0
+    free = 0  # inert facts: whether reached or not, they enable nothing
+    named = {a[1:] if a[:1] == ("not",) else a for a in goal}
     for atom in facts:
         bit = index.get(atom)
         if bit is None:
+            if atom[0] in inert and atom not in named:
+                continue
             return None
         mask |= 1 << bit
-    if mask & ~g.reached:
+        if atom[0] in inert and atom not in named:
+            free |= 1 << bit
+    if mask & ~g.reached & ~free:
         return None
     nums = [math.nan] * len(g.var_index)
     for head, var in g.var_index.items():
         nums[var] = values.get(head, math.nan)
     return replace(g.task, init_facts=mask, init_nums=tuple(nums))
+
+
+def condition_predicates(domain: Domain) -> frozenset[str]:
+    """The predicates some action's condition reads (its conditions and those of its
+    conditional effects, at any time, either sign)."""
+    names: set[str] = set()
+
+    def conds(items: tuple[Cond, ...]) -> None:
+        for c in items:
+            if isinstance(c, Lit):
+                names.add(c.atom.predicate)
+            elif isinstance(c, ForallCond | ExistsCond):
+                conds(c.body)
+            elif isinstance(c, OrCond):
+                for part in c.parts:
+                    conds(part)
+
+    def effects(items: tuple[Effect, ...]) -> None:
+        for e in items:
+            if isinstance(e, WhenEffect):
+                conds(e.condition)
+                effects(e.body)
+            elif isinstance(e, ForallEffect):
+                effects(e.body)
+
+    for action in domain.actions:
+        conds(action.conditions)
+        effects(action.effects)
+    return frozenset(names)
 
 
 def reaches_goal(task: Task, state: State | None = None) -> bool:
