@@ -32,6 +32,13 @@ def test_three_bdi_robots_recycle_all_litter_with_no_item_picked_twice(tmp_path:
     agents = summary["stats"]["agents"]
     assert summary["stats"]["litter_recycled"] == 9 and summary["stats"]["litter_on_ground"] == 0
     assert all(a["recycled"] > 0 for a in agents.values()), agents  # every robot took part
+    # Steps started, by action name: the world's counts (it performs them all here).
+    for name, a in agents.items():
+        performed = summary["performed"][name]
+        started = a["moves"] + a["blocked"] + a["failed"]  # a step that failed ran too
+        assert a["moves"] <= performed["move"] <= started, (name, performed, a)
+        assert a["pickups"] <= performed["litter_pickup"] <= a["pickups"] + a["failed"]
+        assert a["recycled"] <= performed["recycle"] <= a["recycled"] + a["failed"]
 
     recorded = list(read_messages(rec))
     outcomes = [

@@ -29,6 +29,7 @@ class Drive:
     def __init__(self, bus):
         self.bus, self.ids = bus, itertools.count(1)
     async def perform(self, call: ActionCall) -> Outcome:
+        print("called", call.args[2], flush=True)
         x, y = (int(v) for v in call.args[2].split("_")[1:])
         rid = f"drive-{next(self.ids)}"
         ends = messages(self.bus, keys.world_outcomes(call.agent), ActionOutcome, LogSink())
@@ -88,3 +89,10 @@ def test_a_performer_process_carries_out_an_action_the_world_does_not(tmp_path: 
     assert drove.count("drove") >= 5, drove[-2000:]
     assert summary["stats"]["agents"]["robot1"]["recycled"] == 3
     assert summary["stats"]["agents"]["robot1"]["moves"] >= 5
+    # The summary counts the steps started, whoever performed them: every drive the
+    # performer was called for (the world saw only its own `move`s; one started as the
+    # world ended the run may be reported too late to count), and the world's actions.
+    performed = summary["performed"]["robot1"]
+    called = drove.count("called")
+    assert called - 1 <= performed["drive"] <= called, (performed, drove[-2000:])
+    assert performed["litter_pickup"] == 3 and performed["recycle"] >= 1, performed

@@ -365,6 +365,9 @@ def _report(summary: RunSummary, as_json: bool) -> None:
         acts = summary.actions.get(name)
         if acts:
             text += f" actions={acts['actions']} first_action_at={acts['first_action']}"
+        done = summary.performed.get(name)
+        if done:
+            text += " performed=" + ",".join(f"{a}:{n}" for a, n in sorted(done.items()))
         print(f"  {name}: {text}", file=sys.stderr)
     planners = summary.planner.get("agents", {})
     rows = [*planners.items(), ("total", summary.planner.get("total", {}))] if planners else []

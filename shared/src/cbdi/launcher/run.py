@@ -53,6 +53,7 @@ from cbdi.security import (
     run_dir,
 )
 from cbdi.security.policy import LAUNCHER
+from cbdi.wire.agent import ActionStatus
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import ActionRequest, Tick
 
@@ -265,7 +266,15 @@ async def _start_all(
     tg.create_task(count_plans(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
     act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
     tg.create_task(
-        count_actions(inputs(bus, [keys.CLOCK, act], (Tick, ActionRequest), LogSink()), summary)
+        count_actions(
+            inputs(
+                bus,
+                [keys.CLOCK, act, keys.executor_status("*")],
+                (Tick, ActionRequest, ActionStatus),
+                LogSink(),
+            ),
+            summary,
+        )
     )
     if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
         from cbdi.view import text_view

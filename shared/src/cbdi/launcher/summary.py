@@ -13,6 +13,7 @@ from cbdi.bus import request
 from cbdi.bus.base import Bus
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import Scenario
+from cbdi.wire.agent import ActionStatus
 from cbdi.wire.base import Message
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
 
@@ -40,6 +41,9 @@ class RunSummary:
     planner: dict[str, Any] = field(default_factory=dict)  # PlannerTally.summary()
     # Per agent: `actions` it asked the world for and the simulated time of the first.
     actions: dict[str, dict[str, Any]] = field(default_factory=dict)
+    # Per agent: the plan steps its executor started, by action name, whoever performed
+    # them (the world or a performer process).
+    performed: dict[str, dict[str, int]] = field(default_factory=dict)
     # The world's request trace (cbdi_world.trace): its length and digest. Equal
     # digests, equal runs.
     requests: int = 0
@@ -67,11 +71,19 @@ async def count_plans(
 
 
 async def count_actions(stream: AsyncIterator[tuple[str, Message]], summary: RunSummary) -> None:
-    """Count each agent's action requests and note the simulated time of its first."""
+    """Count each agent's action requests to the world and note the simulated time of its
+    first; and the steps its executor started (`running`), by action name, whoever
+    performs them."""
     now = 0.0
+    started: set[tuple[str, str]] = set()  # (agent, step id) seen running
     async for _, msg in stream:
         if isinstance(msg, Tick):
             now = msg.time
+        elif isinstance(msg, ActionStatus):
+            if msg.status == "running" and (msg.agent, msg.step_id) not in started:
+                started.add((msg.agent, msg.step_id))
+                by_name = summary.performed.setdefault(msg.agent, {})
+                by_name[msg.action] = by_name.get(msg.action, 0) + 1
         elif isinstance(msg, ActionRequest):
             agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
             agent["actions"] += 1
