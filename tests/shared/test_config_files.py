@@ -7,6 +7,7 @@ files gives nothing else, and `cbdi up` exits 2 for a bad scenario.
 
 from __future__ import annotations
 
+import os
 import random
 import subprocess
 import sys
@@ -228,3 +229,18 @@ def test_a_domain_action_nobody_performs_stops_cbdi_up_before_it_starts(tmp_path
     )
     with pytest.raises(CbdiError, match="performers: the domain has no action 'fly'"):
         load_agent(bad, "robot1")
+
+
+def test_cbdi_up_exits_2_for_a_search_core_that_does_not_exist() -> None:
+    """A mistyped CBDI_SEARCH_CORE stops the run before it starts (the planner used to
+    log it and plan nothing, and the run ended incomplete)."""
+    env = {**os.environ, "CBDI_SEARCH_CORE": "bogus"}
+    done = subprocess.run(
+        [str(CBDI), "up", "paper-7x7", "--json", "--quiet"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "robot1/planner" in done.stderr and "CBDI_SEARCH_CORE='bogus'" in done.stderr

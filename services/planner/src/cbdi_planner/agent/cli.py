@@ -17,6 +17,7 @@ from cbdi.runtime import load_config, run_service
 from cbdi.runtime.together import TogetherService
 from cbdi_planner.agent.backends import BACKENDS
 from cbdi_planner.agent.service import PlannerSettings, planner_main
+from cbdi_planner.core import compiled
 from cbdi_planner.errors import PlannerError
 from cbdi_planner.pddl import parse_domain
 
@@ -43,6 +44,7 @@ def shell(argv: Sequence[str] | None = None) -> TogetherService:
     backend = settings.backend or raw.planning.backend
     if backend not in BACKENDS:
         raise CbdiError(f"unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
+    compiled()  # CBDI_SEARCH_CORE names a core that runs here (CoreError says what not)
     try:
         domain = parse_domain(raw.domain.read_text(encoding="utf-8"), str(raw.domain))
     except PlannerError as exc:
