@@ -83,7 +83,7 @@ def test_services_run_with_two_malloc_arenas_unless_told_otherwise(
         await proc.start()
         assert proc.proc is not None
         await proc.proc.wait()
-        for _ in range(300):  # the output pump may still be reading
+        for _ in range(1000):  # the output pump may still be reading
             if len(said) > 1:
                 break
             await asyncio.sleep(0.01)
