@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import asyncio
 import io
+import math
+from functools import partial
+
+import pytest
 
 from cbdi import keys
 from cbdi.bus import MemoryNetwork, request
 from cbdi.runtime.log import Log
 from cbdi.runtime.together import Together, TogetherService
-from cbdi.sensor import Prototype, SensorLoop, run_sensor
+from cbdi.sensor import Change, Prototype, SensorLoop, run_sensor
 from cbdi.wire.agent import AgentReply, AgentState, StateRequest
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
@@ -36,16 +40,15 @@ class Cells:
 
 def test_the_loop_tells_changes_once_and_leaves_refusals_until_the_reading_changes() -> None:
     loop = SensorLoop("robot1", Cells())
-    assert loop.changes([("c_1_1",), ("c_2_2",), ("a", "b")]) == [
-        (("c_1_1",), True),
-        (("c_2_2",), True),
-    ]
-    loop.answered(("c_1_1",), True, AgentReply(accepted=True))
-    loop.answered(("c_2_2",), True, AgentReply(accepted=False, reason="no"))
+    add, delete = partial(Change, op="add_belief"), partial(Change, op="del_belief")
+    assert loop.changes([("c_1_1",), ("c_2_2",), ("a", "b")]) == [add(("c_1_1",)), add(("c_2_2",))]
+    assert loop.rejected == ["expected 1 argument(s), got 2: ('a', 'b')"]
+    loop.answered(add(("c_1_1",)), AgentReply(accepted=True))
+    loop.answered(add(("c_2_2",)), AgentReply(accepted=False, reason="no"))
     assert loop.changes([("c_1_1",), ("c_2_2",)]) == []  # told, and refused: not again
-    assert loop.changes([]) == [(("c_1_1",), False)]  # c_2_2's refusal is forgotten
-    assert loop.changes([("c_2_2",)]) == [(("c_2_2",), True), (("c_1_1",), False)]
-    assert loop.request(("c_2_2",), True).belief == "(free c_2_2)"
+    assert loop.changes([]) == [delete(("c_1_1",))]  # c_2_2's refusal is forgotten
+    assert loop.changes([("c_2_2",)]) == [add(("c_2_2",)), delete(("c_1_1",))]
+    assert loop.request(add(("c_2_2",))).belief == "(free c_2_2)"
 
 
 async def test_a_sensor_adds_and_deletes_beliefs_of_its_prototype() -> None:
@@ -90,3 +93,79 @@ async def test_a_sensor_adds_and_deletes_beliefs_of_its_prototype() -> None:
             t.cancel()
         task.cancel()
         await asyncio.gather(task, *sensors, return_exceptions=True)
+
+
+class Battery:
+    """Senses (battery ?r): the test sets what it reads."""
+
+    prototype = Prototype("battery", 1, kind="function", threshold=0.5)
+
+    def __init__(self) -> None:
+        self.now: dict[tuple[str, ...], float] = {}
+
+    async def read(self) -> dict[tuple[str, ...], float]:
+        return self.now
+
+
+class Bumps:
+    """Senses (bumped ?r) events: each read gives those since the last and forgets them."""
+
+    prototype = Prototype("bumped", 1, kind="event")
+
+    def __init__(self) -> None:
+        self.now: list[tuple[str, ...]] = []
+
+    async def read(self) -> list[tuple[str, ...]]:
+        out, self.now = self.now, []
+        return out
+
+
+def test_a_function_sensor_tells_a_value_once_it_moves_beyond_its_threshold() -> None:
+    loop = SensorLoop("robot1", Battery())
+    first = loop.changes({("robot1",): 42.5})
+    assert first == [Change(("robot1",), "add_belief", 42.5)]
+    request = loop.request(first[0])
+    assert (request.belief, request.threshold) == ("(= (battery robot1) 42.5)", 0.5)
+    loop.answered(first[0], AgentReply(accepted=True))
+    assert loop.changes({("robot1",): 42.9}) == []  # noise: within 0.5 of what was told
+    assert loop.changes({("robot1",): 41.9}) == [Change(("robot1",), "add_belief", 41.9)]
+    assert loop.changes({}) == []  # no longer read: it keeps its last value
+    # A refused value is not sent again until it moves beyond the threshold.
+    loop.answered(Change(("robot1",), "add_belief", 41.9), AgentReply(accepted=False))
+    assert loop.changes({("robot1",): 42.0}) == []
+    assert loop.changes({("robot1",): 40.0}) == [Change(("robot1",), "add_belief", 40.0)]
+
+
+def test_readings_that_do_not_fit_the_prototype_are_left_out_with_the_reason() -> None:
+    loop = SensorLoop("robot1", Battery())
+    reading = {
+        ("robot1",): math.nan,
+        ("robot2",): math.inf,
+        ("robot3", "x"): 1.0,
+        ("a b",): 1.0,
+        ("robot4",): 7.0,
+    }
+    assert loop.changes(reading) == [Change(("robot4",), "add_belief", 7.0)]
+    assert loop.rejected == [
+        "value nan of (battery robot1) is not a finite number",
+        "value inf of (battery robot2) is not a finite number",
+        "expected 1 argument(s), got 2: ('robot3', 'x')",
+        "argument 'a b' is not a name (no spaces or parentheses)",
+    ]
+    assert loop.changes({("robot1",): "full"}) == []  # type: ignore[dict-item]
+    assert loop.rejected == ["value 'full' of (battery robot1) is not a finite number"]
+    with pytest.raises(ValueError, match="only a function's readings have a threshold"):
+        Prototype("bumped", 1, kind="event", threshold=1.0)
+    with pytest.raises(ValueError, match="threshold nan is not a number >= 0"):
+        Prototype("battery", 1, kind="function", threshold=math.nan)
+
+
+def test_an_event_is_told_once_and_again_only_if_the_agent_did_not_answer() -> None:
+    loop = SensorLoop("robot1", Bumps())
+    bump = Change(("robot1",), "event")
+    assert loop.changes([("robot1",)]) == [bump]
+    assert loop.request(bump).op == "event" and loop.request(bump).belief == "(bumped robot1)"
+    assert loop.changes([]) == [bump]  # not answered (the scheduler was away): again
+    loop.answered(bump, AgentReply(accepted=True))
+    assert loop.changes([]) == []  # told: never again
+    assert loop.changes([("robot1",), ("robot1",)]) == [bump, bump]  # two bumps

@@ -22,6 +22,7 @@ __all__ = [
     "ExecutionSettings",
     "PlanningSettings",
     "RawAgentFile",
+    "domain_functions",
     "domain_signature",
     "read_agent_file",
 ]
@@ -277,25 +278,39 @@ def domain_signature(text: str) -> dict[str, int]:
     an agent file's check that its beliefs, rules and goals name what the domain has,
     without the common library depending on the planner's parser.
     """
+    return {name: arity for _section, name, arity in _declared(text)}
+
+
+def domain_functions(text: str) -> frozenset[str]:
+    """Return the names of the functions (numeric fluents) a PDDL domain declares: what
+    a belief `(= (name ...) value)` may name, and a plain atom may not."""
+    return frozenset(name for section, name, _ in _declared(text) if section == ":functions")
+
+
+def _declared(text: str) -> list[tuple[str, str, int]]:
+    """Every `(:predicates ...)` and `(:functions ...)` entry: (section, name, arity)."""
     tokens = [t.lower() for t in _TOKEN.findall(text) if not t.startswith(";")]
-    found: dict[str, int] = {}
+    found: list[tuple[str, str, int]] = []
     i = 0
     while i < len(tokens) - 1:
         if tokens[i] == "(" and tokens[i + 1] in (":predicates", ":functions"):
-            i = _declarations(tokens, i + 2, found)
+            i = _declarations(tokens, i + 2, tokens[i + 1], found)
         else:
             i += 1
     return found
 
 
-def _declarations(tokens: list[str], i: int, found: dict[str, int]) -> int:
+def _declarations(
+    tokens: list[str], i: int, section: str, found: list[tuple[str, str, int]]
+) -> int:
     """Read `(name ?a - t ?b)...` up to the section's `)`; return the index after it."""
     while i < len(tokens) and tokens[i] != ")":
         if tokens[i] == "(" and i + 1 < len(tokens):
             j = i + 2
             while j < len(tokens) and tokens[j] not in ("(", ")"):
                 j += 1
-            found[tokens[i + 1]] = sum(t.startswith("?") for t in tokens[i + 2 : j])
+            arity = sum(t.startswith("?") for t in tokens[i + 2 : j])
+            found.append((section, tokens[i + 1], arity))
             i = j
         i += 1
     return i + 1

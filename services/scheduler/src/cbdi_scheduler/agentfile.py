@@ -18,11 +18,12 @@ from cbdi.agentfile import (
     AgentFileError,
     PlanningSettings,
     RawAgentFile,
+    domain_functions,
     domain_signature,
     parse_agent_text,
     read_agent_file,
 )
-from cbdi.beliefs import INSTANCE, PREDICATE, Belief
+from cbdi.beliefs import FUNCTION, INSTANCE, PREDICATE, Belief
 from cbdi.keys import validate_name
 from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
@@ -70,6 +71,7 @@ class AgentFile:
     # predicates: what beliefs, goals and conditions may name (requests are checked too).
     signature: Mapping[str, int] = field(default_factory=dict)
     private_predicates: frozenset[str] = frozenset()
+    functions: frozenset[str] = frozenset()  # which of the signature's are functions
 
 
 def load_agent(path: str | Path, agent: str) -> AgentFile:
@@ -85,7 +87,8 @@ def parse_agent(text: str, source: str, agent: str, base: Path) -> AgentFile:
 def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
     data, source, domain = raw.data, raw.source, raw.domain
     r = _Reader(source, data)
-    r.signature = _signature(source, domain)
+    text = _domain_text(source, domain)
+    r.signature, r.functions = domain_signature(text), domain_functions(text)
     r.private = frozenset(
         r.check(p, str, f"private_predicates[{i}]")
         for i, p in enumerate(r.opt(data, "private_predicates", list, []))
@@ -119,14 +122,20 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         planning=raw.planning,
         signature=r.signature,
         private_predicates=r.private,
+        functions=r.functions,
     )
 
 
 def undeclared(
-    belief: Belief, signature: Mapping[str, int], private: frozenset[str], goal: bool = False
+    belief: Belief,
+    signature: Mapping[str, int],
+    private: frozenset[str],
+    goal: bool = False,
+    functions: frozenset[str] | None = None,
 ) -> str:
     """Say why `belief` names nothing the domain declares with that arity (nor, outside
-    goals, a private predicate); "" when it does."""
+    goals, a private predicate); "" when it does. Given the domain's `functions`, a
+    function value must name a function and an atom a predicate."""
     if belief.kind == INSTANCE:
         return ""
     arity = signature.get(belief.name)
@@ -135,6 +144,13 @@ def undeclared(
             return ""
         where_else = "" if goal else " nor in private_predicates"
         return f"{belief.name!r} is not declared by the domain{where_else}"
+    if functions is not None:
+        is_function = belief.name in functions
+        if belief.kind == FUNCTION and not is_function:
+            return f"{belief.name!r} is a predicate of the domain, not a function"
+        if belief.kind != FUNCTION and is_function:
+            value = f"(= ({belief.name} ...) N)"
+            return f"{belief.name!r} is a function of the domain: give its value, {value}"
     if len(belief.params) != arity:
         return f"{belief.name!r} takes {arity} argument(s), got {len(belief.params)}"
     return ""
@@ -172,6 +188,7 @@ class _Reader:
         self.source, self.data = source, data
         self.signature: dict[str, int] = {}  # the domain's predicates and functions
         self.private: frozenset[str] = frozenset()  # beliefs only the scheduler keeps
+        self.functions: frozenset[str] = frozenset()  # the domain's functions
 
     def fail(self, where: str, reason: str) -> AgentFileError:
         return AgentFileError(self.source, where, reason)
@@ -211,7 +228,7 @@ class _Reader:
     def declared(self, belief: Belief, where: str, goal: bool = False) -> Belief:
         """Fail unless the domain declares `belief`'s predicate or function (with its
         arity), or, outside goals, the file lists it in `private_predicates`."""
-        why = undeclared(belief, self.signature, self.private, goal)
+        why = undeclared(belief, self.signature, self.private, goal, self.functions)
         if why:
             raise self.fail(where, why)
         return belief
@@ -337,8 +354,8 @@ _PLACEHOLDER = re.compile(r"\{\w+\}")
 _JOINT = re.compile(r"[A-Za-z][A-Za-z0-9_\-]{0,62}")
 
 
-def _signature(source: str, domain: Path) -> dict[str, int]:
+def _domain_text(source: str, domain: Path) -> str:
     try:
-        return domain_signature(domain.read_text(encoding="utf-8"))
+        return domain.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise AgentFileError(source, "domain", f"cannot read {domain}: {exc}") from None

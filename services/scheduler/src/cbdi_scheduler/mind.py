@@ -1,6 +1,7 @@
 """The agent's mind: the BDI cycle as one pure object, fed by events, giving commands.
 
-On every percept: revise beliefs (Events Monitor), fire the reactive rules, drop desires
+On every percept: revise beliefs (Events Monitor), fire the reactive rules (on the
+events sensed since the last cycle too, which are never standing beliefs), drop desires
 whose deadline passed or whose context failed, notice an achieved intention, and let the
 goal reasoner choose what to pursue; the intention scheduler turns that into commands.
 Plans, search failures, step statuses and arrest reports go to the intention scheduler.
@@ -10,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from cbdi.beliefs import Belief, BeliefSet, fact
+from cbdi.beliefs import FUNCTION, Belief, BeliefSet, fact
 from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
 from cbdi.wire.world import ActionOutcome, Percepts, Sensed
 from cbdi_scheduler.agentfile import AgentFile
@@ -59,6 +60,7 @@ class Mind:
         # cycle counts it as a change, so a failed search waiting for one is retried.
         self.changed = False
         self.asking: frozenset[Ask] = frozenset()  # the asks the rules made last time
+        self.events: list[Belief] = []  # told since the last cycle, for its rules only
 
     def event(self, desire: Desire, event: str, reason: str = "") -> DesireEvent:
         return DesireEvent(
@@ -79,11 +81,12 @@ class Mind:
         changed, self.changed = self.changed or out.beliefs_changed, False
         out.events += self.requested
         self.requested = []
-        if out.beliefs_changed or self.epoch == 0 or self.refire:
+        events, self.events = self.events, []
+        if out.beliefs_changed or self.epoch == 0 or self.refire or events:
             # After a drop the rules fire again even on unchanged beliefs: what made the
             # desire (an object still waiting there) may well make it again.
             self.refire = False
-            self._fire(out)
+            self._fire(out, events)
         self._coordinate(out)
         self._stop_or_resume(out)
         self._deliberate(out)
@@ -130,12 +133,35 @@ class Mind:
         if cur is not None:
             out.events.append(self.event(cur.desire, "halted" if asked else "resumed"))
 
-    def request_beliefs(self, add: list[Belief], remove: list[Belief]) -> None:
-        """Believe `add` and stop believing `remove` (a request); the rules fire again."""
+    def request_beliefs(
+        self, add: list[Belief], remove: list[Belief], threshold: float = 0.0
+    ) -> None:
+        """Believe `add` and stop believing `remove` (a request); the rules fire again.
+
+        A function value in `add` within `threshold` of the value believed is no change
+        (a sensor's noise): it is not taken, and a request of nothing else neither fires
+        the rules nor retries a failed search.
+        """
+        add = [b for b in add if not self._within(b, threshold)]
+        if not add and not remove:
+            return
         before = self.beliefs
         self.beliefs = self.beliefs.removing(remove).adding(add)
         self.refire = True
         self.changed = self.changed or self.beliefs != before
+
+    def _within(self, belief: Belief, threshold: float) -> bool:
+        if belief.kind != FUNCTION:
+            return False
+        held = self.beliefs.fluents.get(belief.atom)
+        return held is not None and abs(belief.value - held) <= threshold
+
+    def request_event(self, event: Belief) -> None:
+        """Let the rules of the next cycle see `event`, a predicate atom, as a belief; it
+        is not believed before or after (the planner never sees it). Events of one atom
+        told between two cycles are one."""
+        if event not in self.events:
+            self.events.append(event)
 
     def _believe_stalled(self) -> None:
         """Believe `(stalled DESIRE)` while the intention's blocked wait is stalled, so a
@@ -150,12 +176,17 @@ class Mind:
         )
         self.refire = True
 
-    def _fire(self, out: Reaction) -> None:
-        fired = fire_rules(self.spec.rules, self.beliefs, self.desires, self.now)
+    def _fire(self, out: Reaction, events: list[Belief]) -> None:
+        """Fire the rules on the beliefs and this cycle's `events`; then forget the
+        events (one believed anyway stays: it is a standing belief too)."""
+        passing = [e for e in events if not self.beliefs.holds(e)]
+        seen = self.beliefs.adding(passing) if passing else self.beliefs
+        fired = fire_rules(self.spec.rules, seen, self.desires, self.now)
         desires = self._unclaimed(fired.desires)
         added = [d for n, d in desires.items() if n not in self.desires]
         boosted = [n for n in fired.boosted if n in desires and desires[n] != self.desires.get(n)]
-        self.beliefs, self.desires = fired.beliefs, desires
+        beliefs = fired.beliefs.removing(passing) if passing else fired.beliefs
+        self.beliefs, self.desires = beliefs, desires
         out.events += [self.event(d, "added") for d in added]
         out.events += [self.event(self.desires[n], "boosted") for n in boosted]
         # An ask goes once, when its rule starts to match: not again while it matches.

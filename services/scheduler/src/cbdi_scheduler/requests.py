@@ -1,5 +1,6 @@
-"""Requests from other agents and operators: check, add or remove beliefs and desires,
-for allowed groups only; and the agent's state, for anyone who may read it.
+"""Requests from other agents, operators and sensors: check, add or remove beliefs and
+desires, tell of events, for allowed groups only; and the agent's state, for anyone who
+may read it.
 
 Every literal is read as agent files read it and checked against the domain (a
 predicate the domain lacks is refused, naming it); `{self}` stands for the agent.
@@ -11,7 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
-from cbdi.beliefs import Belief
+from cbdi.beliefs import PREDICATE, Belief
 from cbdi.wire.agent import AgentReply, AgentRequest
 from cbdi_scheduler.agentfile import undeclared
 from cbdi_scheduler.conditions import Condition
@@ -25,6 +26,7 @@ OPS = (
     "check_belief",
     "add_belief",
     "del_belief",
+    "event",
     "check_desire",
     "add_desire",
     "del_desire",
@@ -87,9 +89,19 @@ def _serve(mind: Mind, req: AgentRequest) -> Served:
         belief = _belief(mind, req.belief, "belief")
         if req.op == "check_belief":
             return Served(AgentReply(accepted=True, holds=mind.beliefs.holds(belief)))
+        if req.op == "event":
+            if belief.kind != PREDICATE:
+                why = f"belief: an event is a predicate atom like (bumped robot1), not {belief}"
+                raise _Refused(why)
+            return Served(
+                AgentReply(accepted=True, holds=True), partial(mind.request_event, belief)
+            )
         adding = req.op == "add_belief"
         change = partial(
-            mind.request_beliefs, [belief] if adding else [], [] if adding else [belief]
+            mind.request_beliefs,
+            [belief] if adding else [],
+            [] if adding else [belief],
+            req.threshold,
         )
         return Served(AgentReply(accepted=True, holds=adding), change)
     if not req.desire or not req.goal:
@@ -128,7 +140,7 @@ def _belief(mind: Mind, text: str, where: str, goal: bool = False) -> Belief:
 
 def _check_declared(mind: Mind, belief: Belief, where: str, goal: bool = False) -> None:
     spec = mind.spec
-    why = undeclared(belief, spec.signature, spec.private_predicates, goal)
+    why = undeclared(belief, spec.signature, spec.private_predicates, goal, spec.functions)
     if why and spec.signature:  # an agent file read without its domain checks nothing
         raise _Refused(f"{where}: {why}")
 

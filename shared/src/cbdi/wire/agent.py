@@ -60,6 +60,7 @@ RequestOp = Literal[
     "check_belief",
     "add_belief",
     "del_belief",
+    "event",
     "check_desire",
     "add_desire",
     "del_desire",
@@ -190,13 +191,17 @@ class DesireEvent(Message, frozen=True, tag="cbdi.agent.DesireEvent/1"):
 
 
 class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
-    """Another agent or an operator asks to check, add or remove a belief or a desire.
+    """Another agent, an operator or a sensor asks to check, add or remove a belief or a
+    desire, or tells of an event.
 
-    `op` is `check_belief`, `add_belief`, `del_belief`, `check_desire`, `add_desire`,
-    `del_desire`, or `halt` (a safe stop: the running step ends, nothing more starts,
-    every desire is kept and its deadline waits) and `resume`; beliefs, goal literals and
-    condition literals are written as in agent files (`(parcel_at p1 c_6_1)`,
-    `(not (holding {self} *))`). It is served only
+    `op` is `check_belief`, `add_belief`, `del_belief`, `event`, `check_desire`,
+    `add_desire`, `del_desire`, or `halt` (a safe stop: the running step ends, nothing
+    more starts, every desire is kept and its deadline waits) and `resume`; beliefs, goal
+    literals and condition literals are written as in agent files (`(parcel_at p1 c_6_1)`,
+    `(= (battery robot1) 42.5)`, `(not (holding {self} *))`). An `event` is a predicate
+    atom the rules see in the next cycle only (`(bumped robot1)`): never a standing
+    belief. `threshold`: an `add_belief` of a function value within this much of the
+    believed value changes nothing (a sensor's noise). It is served only
     if `group` is one of this agent's allowed groups. `deadline` is relative to the
     time the desire is added (0: none). `epoch`: the asker's epoch, set by an agent that
     asks from a rule (`ask`, docs/agents.md): what the request changes is applied before
@@ -215,6 +220,7 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     precondition: Condition = []
     context: Condition = []
     epoch: Epoch = -1
+    threshold: NonNegative = 0.0
 
 
 class AgentReply(Message, frozen=True, tag="cbdi.agent.AgentReply/1"):
