@@ -153,10 +153,15 @@ def _parser() -> argparse.ArgumentParser:
         one.add_argument("agent")
         one.add_argument("name")
 
-    belief = sub.add_parser("belief", help="add, remove or check a belief")
+    belief = sub.add_parser("belief", help="add, remove or check a belief, or tell an event")
     bsub = belief.add_subparsers(dest="op", required=True)
-    for op in ("add", "remove", "check"):
-        one = leaf(bsub, op, f"{op} a belief")
+    for op, text in (
+        ("add", "add a belief ('(= (battery robot1) 40)' sets a value)"),
+        ("remove", "remove a belief"),
+        ("check", "check a belief"),
+        ("event", "tell an event: the rules of the next cycle see it once, never believed"),
+    ):
+        one = leaf(bsub, op, text)
         one.add_argument("agent")
         one.add_argument("belief", help="e.g. '(delivered p1)'")
     for op, text in (("stop", "stop agents safely"), ("resume", "resume stopped agents")):
@@ -199,6 +204,7 @@ _OPS = {
     ("belief", "add"): "add_belief",
     ("belief", "remove"): "del_belief",
     ("belief", "check"): "check_belief",
+    ("belief", "event"): "event",
 }
 
 
