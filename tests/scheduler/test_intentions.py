@@ -205,3 +205,35 @@ def test_a_restarted_executor_has_the_intention_planned_again_and_its_failure_wa
     assert kinds(s.retry(4.0)) == ["start_search"]
     assert kinds(s.on_search_failed("no plan", now=5.0)) == ["wait"]  # the next one counts
     assert s.current.plan_failures == 1
+
+
+def test_a_wait_says_when_the_search_is_tried_again() -> None:
+    s = IntentionScheduler(wait_stall=5)
+    s.choose(RECYCLE)  # deadline 100
+    waits = s.on_search_failed("no plan")
+    assert waits[0].reason == (
+        "planning failed (no plan); searching again when the beliefs change; its deadline is t=100"
+    )
+    assert s.retry_when() == "when the beliefs change; its deadline is t=100"
+    s.retry(3.0)
+    blocked = s.on_search_failed("a person on the goal", blocked=True, now=4.0)
+    assert blocked[0].reason == (
+        "a person on the goal; searching again when the beliefs change, or at t=9 if nothing"
+        " does; its deadline is t=100"
+    )
+
+
+def test_a_search_that_fails_after_the_beliefs_changed_under_it_is_retried_at_once() -> None:
+    """A search from the beliefs before a change (a sensor's reading that came while it
+    ran) fails; the change was counted while it ran, so no further change is needed."""
+    s = IntentionScheduler()
+    s.choose(RECYCLE)
+    s.changed_meanwhile = True  # the mind: the beliefs changed at a cycle meanwhile
+    waits = s.on_search_failed("no plan")
+    assert "searching again at the next cycle (the beliefs changed while it searched)" in (
+        waits[0].reason
+    )
+    assert s.retry_due
+    assert kinds(s.retry()) == ["start_search"] and not s.retry_due
+    s.on_search_failed("no plan")  # from the beliefs of now: waits for a change
+    assert not s.retry_due and s.retry_when().startswith("when the beliefs change")

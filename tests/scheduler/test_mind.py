@@ -350,3 +350,26 @@ def test_a_failed_replan_is_retried_when_a_sensor_or_an_outcome_changes_the_beli
     retried = mind.on_percepts(percepts(4, same)).commands
     assert [c.kind for c in retried] == ["start_search"]
     assert [c.kind for c in mind.on_percepts(percepts(5, same)).commands] == []  # once
+
+
+def test_a_search_that_fails_after_a_change_under_it_is_retried_with_no_further_change() -> None:
+    """Real time: the sensor's reading came while the search ran (from the beliefs
+    before it), and a cycle took it in before the search failed. Waiting for yet another
+    change could wait until the deadline; the next cycle searches again."""
+    from cbdi.wire.agent import AgentRequest
+    from cbdi_scheduler.requests import serve_request
+
+    mind = Mind(load_agent(AGENT, "robot1"))
+    same = [("pla1", (1, 1))]
+    assert [c.kind for c in mind.on_percepts(percepts(0, same)).commands] == ["start_search"]
+    sensed = AgentRequest(
+        from_agent="sensor", group="sensors", op="add_belief", belief="(recycled pla9)"
+    )
+    assert serve_request(mind, sensed).accepted
+    assert [c.kind for c in mind.on_percepts(percepts(1, same)).commands] == []  # searching
+    failed = mind.on_search_failed("no plan from the beliefs")
+    assert "at the next cycle" in failed.events[0].reason
+    retried = mind.on_percepts(percepts(2, same)).commands
+    assert [c.kind for c in retried] == ["start_search"]
+    mind.on_search_failed("no plan from the beliefs")  # from the beliefs of now
+    assert [c.kind for c in mind.on_percepts(percepts(3, same)).commands] == []

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+from msgspec.structs import replace
+
 import pytest
 
 from cbdi.ctl import UsageError, format_state, split_literals
@@ -67,6 +69,16 @@ def test_the_state_shows_the_intention_its_steps_and_their_status() -> None:
     assert "intention: recycle (plan p1)" in text and "running" in text
     assert "context [(not (holding robot1 pla1)) (< (loaded_amount robot1) 3)]" in text
     assert not agent_state(mind, log, beliefs=False).beliefs
+    # A failed search: the state says what it failed on and when it is tried again.
+    mind.on_status(replace(status, status="refused", reason="(in robot1 c_0_1) does not hold"))
+    mind.on_search_failed("no plan from the beliefs")
+    waiting = agent_state(mind, log, beliefs=False).intention
+    assert waiting is not None and waiting.retry == "retry after: no plan from the beliefs"
+    assert waiting.retry_when.startswith("when the beliefs change; its deadline is t=")
+    assert (
+        "  retry after: no plan from the beliefs; searching again when the beliefs change"
+        in format_state(agent_state(mind, log, beliefs=False))
+    )
 
 
 def test_literals_split_at_the_top_level_and_bad_ones_say_why() -> None:

@@ -97,7 +97,9 @@ def format_state(state: AgentState) -> str:
         plan = f" (plan {cur.plan_id})" if cur.plan_id else " (no plan yet)"
         lines.append(f"intention: {cur.desire}{plan}{flags}")
         if cur.retry:
-            lines.append(f"  {cur.retry}, when the beliefs change")
+            lines.append(
+                f"  {cur.retry}; searching again {cur.retry_when or 'when the beliefs change'}"
+            )
         for s in cur.steps:
             status = s.status or "sent"
             lines.append(f"  {s.start:8.3f} [{s.duration:g}] {s.action}  {status}")

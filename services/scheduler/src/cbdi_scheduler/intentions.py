@@ -18,13 +18,16 @@ cancel a search, pass a plan to the executor, ask for an early arrest, drop a de
   the way (`blocked`: a person on the goal cell) is not a failure: the intention waits
   and searches again whenever the beliefs change, until its desire's deadline. Any
   failed search waits for the beliefs to change, from whatever source (percepts,
-  outcomes, sensors, an operator), and says so (a `wait` command). A wait
+  outcomes, sensors, an operator), and says so (a `wait` command). A change while
+  the search ran counts too (the search may have started from the beliefs before it): a
+  search that fails after one is retried at the next cycle. A wait
   in which nothing changes for `wait_stall` seconds (a person waiting for the robot that
   waits for it) counts as a failure and searches again, so a deadlock ends in a drop.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan
@@ -84,7 +87,13 @@ class IntentionScheduler:
         self.next_desire: Desire | None = None  # waits for a clean preemption
         self.stopping = False
         self.retry_reason = ""  # a failed search waits for the beliefs to change
+        self.changed_meanwhile = False  # the beliefs changed since the last search began
         self.halted = False  # a safe stop: nothing starts until `resume`
+
+    def _search(self, desire: Desire, reason: str = "") -> Command:
+        """Start (or revise) the search for `desire` from the beliefs of now."""
+        self.changed_meanwhile = False
+        return Command("start_search", desire, reason=reason)
 
     # -- desires -------------------------------------------------------------------------
     def choose(self, desire: Desire | None) -> list[Command]:
@@ -115,14 +124,14 @@ class IntentionScheduler:
         grown = set(cur.desire.goal) <= set(desire.goal)
         cur.desire = desire
         if grown:  # a BOOSTed goal: the planner revises its search (the union)
-            return [Command("start_search", desire, reason="goal revised")]
+            return [self._search(desire, "goal revised")]
         # Part of the goal was given up (claimed by another agent): search anew.
-        return [Command("start_search", desire, reason="goal reduced")]
+        return [self._search(desire, "goal reduced")]
 
     def _start(self, desire: Desire) -> list[Command]:
         self.retry_reason = ""
         self.current = Intention(desire)
-        return [Command("start_search", desire)]
+        return [self._search(desire)]
 
     def _arrest_now(self) -> list[Command]:
         """Stop after the step running now (nothing more starts)."""
@@ -156,7 +165,7 @@ class IntentionScheduler:
         if cur is None:
             return []
         cur.plan_id, cur.steps, cur.last_started, cur.quiet_since = "", [], "", now
-        return [Command("start_search", cur.desire, reason="resumed")]
+        return [self._search(cur.desire, "resumed")]
 
     # -- the planner ---------------------------------------------------------------------
     def on_plan(self, plan: PartialPlan) -> list[Command]:
@@ -197,15 +206,37 @@ class IntentionScheduler:
             if cur.waiting:
                 return []
             cur.waiting, cur.quiet_since = True, now
-            return [Command("wait", cur.desire, reason=reason)]
+            why = f"{reason}; searching again {self.retry_when()}"
+            return [Command("wait", cur.desire, reason=why)]
         cur.waiting = False
         dropped = self._failed_planning(reason)
         if dropped:
             return dropped
         # Said once per failure, so a desire never waits in silence: the log, the
         # desire's events and `cbdi ctl show` tell what failed and what retries it.
-        why = f"planning failed ({reason}); searching again when the beliefs change"
+        why = f"planning failed ({reason}); searching again {self.retry_when()}"
         return [Command("wait", cur.desire, reason=why)]
+
+    @property
+    def retry_due(self) -> bool:
+        """A failed search waits, and the beliefs changed after it began: the next cycle
+        tries it again even if nothing changes then."""
+        return bool(self.retry_reason) and self.changed_meanwhile
+
+    def retry_when(self) -> str:
+        """Say when the failed search waiting is tried again ("" if none waits)."""
+        cur = self.current
+        if cur is None or not self.retry_reason:
+            return ""
+        if self.changed_meanwhile:
+            when = "at the next cycle (the beliefs changed while it searched)"
+        elif cur.waiting:
+            stall = cur.quiet_since + self.wait_stall
+            when = f"when the beliefs change, or at t={stall:g} if nothing does"
+        else:
+            when = "when the beliefs change"
+        deadline = cur.desire.deadline
+        return when + (f"; its deadline is t={deadline:g}" if math.isfinite(deadline) else "")
 
     def _failed_planning(self, reason: str) -> list[Command]:
         cur = self.current
@@ -223,7 +254,7 @@ class IntentionScheduler:
             return []
         reason, self.retry_reason = self.retry_reason, ""
         cur.quiet_since = now
-        return [Command("start_search", cur.desire, reason=reason)]
+        return [self._search(cur.desire, reason)]
 
     def stalled(self, now: float) -> list[Command]:
         """Nothing changed: a blocked wait quiet for `wait_stall` seconds counts as a
@@ -257,7 +288,7 @@ class IntentionScheduler:
         if cur.exec_failures > self.exec_retries:
             return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
         cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
-        return [Command("start_search", cur.desire, reason=f"replan after: {status.reason}")]
+        return [self._search(cur.desire, f"replan after: {status.reason}")]
 
     def executor_restarted(self) -> list[Command]:
         """The executor came back without the plan it had: plan the intention again
@@ -268,7 +299,7 @@ class IntentionScheduler:
             return []
         cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
         cur.after_restart = True
-        return [Command("start_search", cur.desire, reason="the executor restarted")]
+        return [self._search(cur.desire, "the executor restarted")]
 
     def on_arrested(self, report: ArrestReport) -> list[Command]:
         """The executor stopped: start the preempting desire, if one waits for it."""

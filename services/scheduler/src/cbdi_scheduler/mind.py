@@ -79,6 +79,8 @@ class Mind:
         self.beliefs = self.knowledge.on_percepts(self.beliefs, p)
         out = Reaction(beliefs_changed=self.beliefs != before)
         changed, self.changed = self.changed or out.beliefs_changed, False
+        if changed:  # a search under way may have started from the beliefs before
+            self.intentions.changed_meanwhile = True
         out.events += self.requested
         self.requested = []
         events, self.events = self.events, []
@@ -90,7 +92,7 @@ class Mind:
         self._coordinate(out)
         self._stop_or_resume(out)
         self._deliberate(out)
-        if changed:
+        if changed or self.intentions.retry_due:
             out.commands += self.intentions.retry(self.now)
         else:
             stalled = self._with_drops(self.intentions.stalled(self.now))

@@ -100,6 +100,7 @@ def agent_state(mind: Mind, log: PlanLog, beliefs: bool = True) -> AgentState:
             waiting=cur.waiting,
             stopping=mind.intentions.stopping,
             retry=mind.intentions.retry_reason,
+            retry_when=mind.intentions.retry_when(),
         )
     return AgentState(
         agent=mind.agent,

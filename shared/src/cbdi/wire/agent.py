@@ -284,8 +284,10 @@ class IntentionView(Message, frozen=True, tag="cbdi.agent.IntentionView/1"):
     steps: Many[StepView] = []
     waiting: bool = False  # its goal is blocked by something that moves
     stopping: bool = False  # an early arrest is under way
-    # Its last search failed on this and waits for the beliefs to change ("" if not).
+    # Its last search failed on this and waits for the beliefs to change ("" if not),
+    # and when it is tried again (`when the beliefs change, or at t=12 if nothing does`).
     retry: Text = ""
+    retry_when: Text = ""
 
 
 class AgentState(Message, frozen=True, tag="cbdi.agent.AgentState/1"):
