@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import re
 
-from msgspec.structs import replace
-
 import pytest
+from msgspec.structs import replace
 
 from cbdi.ctl import UsageError, format_state, split_literals
 from cbdi.wire import decode, encode
