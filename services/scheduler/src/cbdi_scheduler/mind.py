@@ -21,7 +21,9 @@ from cbdi_scheduler.intentions import Command, Intention, IntentionScheduler
 from cbdi_scheduler.knowledge import DomainKnowledge, load_knowledge
 from cbdi_scheduler.rules import Ask, fire_rules
 
-__all__ = ["Mind", "Reaction"]
+__all__ = ["MAX_EVENTS", "Mind", "Reaction"]
+
+MAX_EVENTS = 10_000  # distinct events told between two cycles that the next one sees
 
 
 @dataclass
@@ -164,6 +166,7 @@ class Mind:
         told between two cycles are one."""
         if event not in self.events:
             self.events.append(event)
+            del self.events[:-MAX_EVENTS]  # no cycle for long (no world): keep the latest
 
     def _believe_stalled(self) -> None:
         """Believe `(stalled DESIRE)` while the intention's blocked wait is stalled, so a
