@@ -242,6 +242,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks/results")
     p.add_argument("--reuse", type=Path, help="render this CSV of runs, run nothing")
     p.add_argument(
+        "--planning-speed",
+        type=float,
+        help="virtual time: expansions per simulated second (default: each scenario's)",
+    )
+    p.add_argument(
         "--up-arg",
         action="append",
         dest="up_args",
@@ -286,6 +291,8 @@ def run_all(
     pool = ThreadPoolExecutor(max_workers=args.jobs)
     try:
         vary = tuple(args.up_args) if args.up_args is not None else VARY
+        if args.planning_speed is not None:
+            vary += ("--planning-speed", f"{args.planning_speed:g}")
         futures = [pool.submit(run_one, *t, ports, args.timeout, vary) for t in tasks]
         for future in as_completed(futures):
             run = future.result()

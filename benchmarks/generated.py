@@ -9,7 +9,8 @@ time (simulated s) and of moves, with 95% bootstrap intervals of the mean
 (`table1_stats`), and which runs did not recycle everything.
 
     .venv/bin/python benchmarks/generated.py [--maps 20] [--agents 1] [--size 9x9]
-        [--litter 4] [--people 2] [--jobs 2] [--csv benchmarks/results/generated.csv]
+        [--litter 4] [--people 2] [--jobs 2] [--planning-speed EXP_PER_S]
+        [--csv benchmarks/results/generated.csv]
 
 Virtual time: every figure is the same on any machine (a run is a function of the map,
 the flags and the seed); only the wall time is this machine's.
@@ -77,6 +78,8 @@ def run(scenario: Path, seed: int, mode: str, args: argparse.Namespace, ports: Q
 def _run(scenario: Path, seed: int, mode: str, args: argparse.Namespace, port: int) -> Run:
     argv = [CBDI, "up", str(scenario), "--agents", str(args.agents), "--mode", mode]
     argv += ["--json", "--quiet", "--max-time", str(args.max_time), "--port", str(port)]
+    if args.planning_speed is not None:
+        argv += ["--planning-speed", str(args.planning_speed)]
     code, out, _err, wall = execute(argv, args.run_timeout)
     try:
         s = json.loads(out)
@@ -138,6 +141,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-time", type=float, default=400.0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--run-timeout", type=float, default=900.0)
+    p.add_argument(
+        "--planning-speed",
+        type=float,
+        default=None,
+        help="virtual time: expansions per simulated second (default: the agent file's)",
+    )
     p.add_argument("--csv", default=str(ROOT / "benchmarks/results/generated.csv"))
     args = p.parse_args(argv)
     if args.maps < 1 or args.agents < 1 or args.jobs < 1:
@@ -169,7 +178,11 @@ def main(argv: list[str] | None = None) -> int:
     print("\n".join(text))
     out.with_suffix(".txt").write_text(
         f"benchmarks/generated.py --maps {args.maps} --agents {args.agents} --size {args.size}"
-        f" --litter {args.litter} --people {args.people}\n" + "\n".join(text) + "\n"
+        f" --litter {args.litter} --people {args.people}"
+        + (f" --planning-speed {args.planning_speed:g}" if args.planning_speed else "")
+        + "\n"
+        + "\n".join(text)
+        + "\n"
     )
     return 0
 

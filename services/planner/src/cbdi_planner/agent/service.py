@@ -3,11 +3,14 @@ offline (plan, then act; the paper's baseline).
 
 Offline:
 
-It keeps the agent's latest beliefs (from the scheduler), and on a search request plans
-from them to the goal with the chosen backend, in a worker thread so the service keeps
-serving; it publishes the plan as one complete `PartialPlan` whose step times are snapped
-to the world's epoch grid from now on, and reports the search status. A revised goal or a
-new request replaces the search; a cancelled search's late result is dropped.
+It keeps the agent's latest beliefs (from the scheduler) and the steps it sent as they
+execute (the executor's statuses), and on a search request plans from the beliefs with
+the running steps' effects applied (the committed state, `cbdi_planner.agent.offline`)
+to the goal with the chosen backend, in a worker thread so the service keeps serving; it
+publishes the plan as one complete `PartialPlan` that follows the running step, whose
+step times are snapped to the world's epoch grid, and reports the search status. A
+revised goal or a new request replaces the search; a cancelled search's late result is
+dropped.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from cbdi.wire.world import EpochAck, Tick
 from cbdi_planner.agent.backends import COUNTING_BACKENDS, Counted, plan_counted, plan_with
 from cbdi_planner.agent.continual import ContinualPlanner, Search, plan_prefix
 from cbdi_planner.agent.errors import BadRequestError, UnknownAgentError
+from cbdi_planner.agent.offline import Basis, Committed, Execution
 from cbdi_planner.agent.pacing import Pacer
 from cbdi_planner.agent.problem import (
     GoalError,
@@ -51,7 +55,7 @@ from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import Event, RoundDone
 from cbdi_planner.errors import PlannerError, SearchTimeout
 from cbdi_planner.pddl import parse_problem
-from cbdi_planner.pddl.ast import Domain, Problem
+from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan
 
 __all__ = ["OnlinePlannerService", "PlannerService", "PlannerSettings", "planner_main"]
@@ -189,7 +193,8 @@ class _Pending:
     """An offline search in virtual time: its result, and expansions still to be paid."""
 
     request: SearchRequest
-    problem: Problem
+    basis: Basis
+    committed: Committed | None = None  # what the search planned from, once it did
     pacer: Pacer = field(default_factory=Pacer)
     result: asyncio.Future[Counted] | None = None
 
@@ -226,16 +231,25 @@ class PlannerService(_Epochs):
         self.searching: asyncio.Task[None] | None = None
         self.plan_ids = count(1)
         self.transients = Transients(raw.transient)
+        # The steps sent, as they execute: a search plans from where they leave the robot.
+        self.execution = Execution()
 
     def input_keys(self) -> list[str]:
         a = self.agent
-        return [keys.planner_requests(a), keys.scheduler_beliefs(a), *self.lockstep_keys()]
+        return [
+            keys.planner_requests(a),
+            keys.scheduler_beliefs(a),
+            keys.executor_status(a),
+            *self.lockstep_keys(),
+        ]
 
     async def handle_input(self, key: str, msg: Message) -> None:
         await self.handle(msg)
 
     async def handle(self, msg: Message) -> None:
-        if isinstance(msg, BeliefsUpdate):
+        if isinstance(msg, ActionStatus):
+            self.execution.on_status(msg)
+        elif isinstance(msg, BeliefsUpdate):
             beliefs = self.beliefs_in.apply(msg)
             if beliefs is None:
                 self.ctx.log.warning("beliefs_skipped", seq=msg.seq, base=msg.base)
@@ -281,7 +295,7 @@ class PlannerService(_Epochs):
         if req.kind == "revise" and self.request is not None:
             req = replace(req, request_id=self.request.request_id)
         try:
-            req, problem = self.problem(req)
+            req, basis = self.problem(req)
         except (GoalError, PlannerError) as exc:
             self.request = None
             await self.status(req.request_id, "failed", str(exc))
@@ -289,9 +303,9 @@ class PlannerService(_Epochs):
         self.request, self.request_failed = req, False
         await self.status(req.request_id, "searching")
         if self.lockstep.on:
-            self.pending = _Pending(req, problem)  # searched and paid for epoch by epoch
+            self.pending = _Pending(req, basis)  # searched and paid for epoch by epoch
             return
-        self.searching = self.ctx.start(self.search(req, problem), name="search")
+        self.searching = self.ctx.start(self.search(req, basis), name="search")
 
     async def plan_epoch(self) -> None:
         """Virtual time: search (bounded by expansions), then pay for it epoch by epoch;
@@ -306,11 +320,11 @@ class PlannerService(_Epochs):
             return  # still searching: this epoch paid for its share
         result = await p.result
         self.pending = None
-        if result.plan is None:
+        if result.plan is None or p.committed is None:
             self.ctx.log.warning("search_failed", request=p.request.request_id, error=result.error)
             await self.failed(p.request, result.error, timeout=result.timeout)
             return
-        await self.publish_plan(p.request, result.plan)
+        await self.publish_plan(p.request, result.plan, p.committed)
 
     def start_paced(self, p: _Pending) -> asyncio.Future[Counted]:
         """Start `p`'s search in a thread of its own that expands only what is paid for
@@ -321,7 +335,8 @@ class PlannerService(_Epochs):
 
         def run() -> None:
             try:
-                result = plan_counted(self.domain, p.problem, most, pace=p.pacer.pace)
+                p.committed = p.basis()
+                result = plan_counted(self.domain, p.committed.problem, most, pace=p.pacer.pace)
             except (GoalError, PlannerError, ValueError) as exc:
                 result = Counted(None, 1, str(exc), timeout=isinstance(exc, SearchTimeout))
             finally:
@@ -337,22 +352,31 @@ class PlannerService(_Epochs):
         threading.Thread(target=run, name="offline-search", daemon=True).start()
         return done
 
-    def problem(self, req: SearchRequest) -> tuple[SearchRequest, Problem]:
-        """The request's problem: its own PDDL problem, or the beliefs and its goal."""
+    def problem(self, req: SearchRequest) -> tuple[SearchRequest, Basis]:
+        """The request (its goal checked here: a bad one is refused at once) and what
+        its search plans from, made in the search's thread (grounding takes a while):
+        its own PDDL problem, or the beliefs and its goal from the committed state
+        (what the steps running now leave, `Execution.commit`)."""
         if req.problem:
             parsed = parse_problem(req.problem, self.domain, f"request {req.request_id}")
             goal = [list(g) for g in req.goal] or goal_of(parsed)
             self.beliefs, self.has_beliefs = beliefs_from_problem(parsed), True
             self.transients.see(self.beliefs)
             req = replace(req, goal=goal, problem="")
-        return req, problem_from_beliefs(self.domain, self.beliefs, req.goal)
+        problem = problem_from_beliefs(self.domain, self.beliefs, req.goal)
+        if not self.execution.steps:
+            return req, lambda: Committed(problem, 0, "", 0.0)
+        execution, beliefs = self.execution.copy(), self.beliefs
+        goal = [list(g) for g in req.goal]
+        return req, lambda: execution.commit(self.domain, beliefs, goal)
 
-    async def search(self, req: SearchRequest, problem: Problem) -> None:
-        """Plan `problem` with the backend; publish the plan and the outcome."""
+    async def search(self, req: SearchRequest, basis: Basis) -> None:
+        """Plan with the backend from `basis`; publish the plan and the outcome."""
         seconds = self.raw.planning.timeout
         try:
+            committed = await asyncio.to_thread(basis)
             plan = await asyncio.to_thread(
-                plan_with, self.backend, self.domain, self.raw.domain, problem, seconds
+                plan_with, self.backend, self.domain, self.raw.domain, committed.problem, seconds
             )
         except (GoalError, PlannerError, ValueError) as exc:
             if self.request is req:
@@ -361,21 +385,33 @@ class PlannerService(_Epochs):
             return
         if self.request is not req:
             return  # replaced or cancelled meanwhile
-        await self.publish_plan(req, plan)
+        await self.publish_plan(req, plan, committed)
 
-    async def publish_plan(self, req: SearchRequest, plan: Plan) -> None:
+    async def publish_plan(self, req: SearchRequest, plan: Plan, committed: Committed) -> None:
         start = math.floor(self.now / self.grid + 1e-9) * self.grid + self.grid
+        start = max(start, math.ceil(committed.ends / self.grid - 1e-9) * self.grid)
         plan_id = f"{self.plan_prefix}{next(self.plan_ids)}"
         steps = [
             replace(s, start=round(s.start / self.grid) * self.grid)
             for s in plan_steps(self.domain, plan, start, plan_id)
         ]
         out = PartialPlan(
-            agent=self.agent, plan_id=plan_id, baseline="", steps=steps, complete=True
+            agent=self.agent,
+            plan_id=plan_id,
+            baseline="",
+            applies_after=committed.after,
+            steps=steps,
+            complete=True,
         )
         self.ctx.log.info(
-            "plan", request=req.request_id, plan=plan_id, steps=len(steps), makespan=plan.makespan
+            "plan",
+            request=req.request_id,
+            plan=plan_id,
+            steps=len(steps),
+            makespan=plan.makespan,
+            after=committed.after,
         )
+        self.execution.follow(committed.count, steps)
         await publish(self.ctx.bus, keys.planner_plans(self.agent), out, block=True)
         await self.status(req.request_id, "done")
 
