@@ -46,7 +46,7 @@ from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.common import RunFinished
 from cbdi.wire.world import Percepts
 from cbdi_executor.service import ExecutorSettings, executor_main
-from cbdi_planner.agent import service as planner_service
+from cbdi_planner.agent import online_service as planner_service
 from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.service import PlannerSettings, planner_main
 from cbdi_planner.pddl import parse_domain
