@@ -371,7 +371,13 @@ class PlannerService(_Epochs):
             for s in plan_steps(self.domain, plan, start, plan_id)
         ]
         out = PartialPlan(
-            agent=self.agent, plan_id=plan_id, baseline="", steps=steps, complete=True
+            agent=self.agent,
+            plan_id=plan_id,
+            baseline="",
+            steps=steps,
+            complete=True,
+            request_id=req.request_id,
+            purpose="revise" if req.kind == "revise" else "new",
         )
         self.ctx.log.info(
             "plan", request=req.request_id, plan=plan_id, steps=len(steps), makespan=plan.makespan
