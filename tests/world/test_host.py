@@ -7,6 +7,7 @@ and publishes the epoch it reached again (in real time too: its outcomes are new
 
 from __future__ import annotations
 
+import asyncio
 import io
 from pathlib import Path
 
@@ -14,7 +15,8 @@ from cbdi import keys
 from cbdi.bus import LogSink, MemoryBus, messages
 from cbdi.runtime.log import Log
 from cbdi.runtime.service import ServiceContext
-from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, Tick
+from cbdi.wire.common import RunFinished
+from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, EpochAck, Tick
 from cbdi_world.recovery import Keeper
 from cbdi_world.service import WorldService, WorldSettings, build_world
 from tests_support import REPO
@@ -23,7 +25,12 @@ MAP = str(REPO / "domains/recycling/maps/paper-7x7.toml")
 
 
 def host(
-    state: Path, bus: MemoryBus, out: io.StringIO, restart: int = 0, lockstep: bool = True
+    state: Path,
+    bus: MemoryBus,
+    out: io.StringIO,
+    restart: int = 0,
+    lockstep: bool = True,
+    max_time: float = 0.0,
 ) -> WorldService:
     settings = WorldSettings(
         simulator="recycling",
@@ -33,6 +40,7 @@ def host(
         state_every=5,
         restart=restart,
         lockstep=lockstep,
+        max_time=max_time,
     )
     ctx = ServiceContext("world", bus, Log("world", stream=out), settings)
     keeper = Keeper(state, ctx.log)
@@ -87,6 +95,36 @@ async def test_a_restart_replays_what_followed_the_save_and_publishes_what_did_n
     _, tick = await anext(ticks)
     assert tick.epoch == 8 and "event=recovered" in out.getvalue()
     assert "replay_differs" not in out.getvalue()
+
+
+async def test_a_lockstep_run_ends_once_every_member_acknowledged_the_last_epoch(
+    tmp_path: Path,
+) -> None:
+    """What the members do in the last epoch (an action asked after the world was done)
+    is sent before the world's last word, which says how much each key carried; the
+    trace and its digest are taken as the run ends, without it."""
+    bus = MemoryBus()
+    ended = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
+    world = host(tmp_path / "world.state", bus, io.StringIO(), max_time=1.0)
+    await world.advance(world.world.initial())
+    x, y = world.world.agents["robot1"].cell  # type: ignore[attr-defined]
+    digest = world.trace.digest()
+    ending = asyncio.create_task(world.advance(world.world.step()))  # epoch 1: time is up
+    await asyncio.sleep(0.05)
+    assert not ending.done() and world.finished is None  # waits for the executor's ack
+    await world.on_act("act", move("robot1-1", (x + 1, y)))
+    status = keys.executor_status("robot1")
+    await world.acks.observe(EpochAck(agent="robot1", epoch=1, sent={status: 3}))
+    await asyncio.wait_for(ending, 5)
+    _, last = await anext(ended)
+    assert (last.reason, last.epoch, last.requests, last.trace_digest) == (
+        "time_limit",
+        1,
+        0,
+        digest,
+    )
+    assert last.sent[status] == 3 and last.sent[keys.CLOCK] == 2  # the member's, the world's
+    assert world.trace.count == 1  # served, after the trace's end
 
 
 async def test_an_ack_seen_before_the_state_file_is_read_is_not_taken_back(

@@ -324,6 +324,10 @@ class WorldService:
         if late:
             self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
 
+    def own_sent(self) -> dict[str, int]:
+        """Return what the world published so far per key (not its acks' or heartbeats')."""
+        return {k: n for k, n in self.ctx.bus.sent.items() if not keys.is_heartbeat(k)}
+
     def tick_of(self, result: EpochResult) -> Tick:
         return Tick(
             epoch=result.epoch,
@@ -357,14 +361,23 @@ class WorldService:
         elif s.max_time > 0 and w.time >= s.max_time:
             reason = "time_limit"
         if reason:
+            requests, digest = self.trace.count, self.trace.digest()
+            sent: dict[str, int] = {}
+            if s.lockstep:
+                # The members' part of the last epoch (their plans, steps started, requests
+                # served after the trace's end) is done and sent before the run ends, so
+                # what a listener counts of it does not hang on when it stopped listening.
+                await self.wait_acks(w.epoch)
+                sent = {**self.acks.published(), **self.own_sent()}
             self.finished = RunFinished(
                 reason=reason,
                 epoch=w.epoch,
                 time=w.time,
                 stalls=dict(self.acks.stalls),
-                requests=self.trace.count,
-                trace_digest=self.trace.digest(),
+                requests=requests,
+                trace_digest=digest,
                 lateness=self.lateness.summary(),
+                sent=sent,
             )
             await publish(self.ctx.bus, keys.world_stream("stats"), w.stats(), block=True)
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)

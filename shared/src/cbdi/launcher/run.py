@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cbdi import keys, tally
-from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish
+from cbdi.bus import BusConfig, LogSink, messages, open_bus, publish
 from cbdi.bus.base import Bus
+from cbdi.bus.typed import sequenced_inputs
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
@@ -42,7 +43,16 @@ from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario, agent_groups
 from cbdi.launcher.services import plan_services
 from cbdi.launcher.specs import run_specs
-from cbdi.launcher.summary import RunSummary, collect_stats, count_actions, count_plans, settle
+from cbdi.launcher.summary import (
+    ACTS,
+    Heard,
+    RunSummary,
+    collect_stats,
+    count_actions,
+    count_plans,
+    counted_keys,
+    settle,
+)
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
 from cbdi.runtime.parent import NICE_ENV
 from cbdi.security import (
@@ -62,6 +72,9 @@ __all__ = ["ROUTER_NOT_LISTENING", "LaunchOptions", "RunSummary", "launch"]
 # How a run that never started because its router could not take its port is told
 # (`run.reason` begins with it): nothing ran, the same run may be tried on another port.
 ROUTER_NOT_LISTENING = "our router could not listen on"
+# Wall seconds the counters get, once the run ended, to hear the messages it says were
+# sent (`RunFinished.sent`): they are on their way, so it takes a moment even when loaded.
+COVER_TIMEOUT = 10.0
 
 
 @dataclass(frozen=True)
@@ -177,6 +190,7 @@ async def _launch(
     ]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
+    heard = Heard()  # what the counters counted, to wait at the end for what they miss
     memory = MemoryPeaks()
     started = time.monotonic()
     bus: Bus | None = None
@@ -191,9 +205,9 @@ async def _launch(
             )
             login = _login(secrets)
             bus, ends = await _start_all(
-                procs, endpoint, opts, tg, summary, planners, launched, login
+                procs, endpoint, opts, tg, summary, (planners, heard), launched, login
             )
-            await _await_end(bus, ends, procs, scenario, opts, tg, summary)
+            await _await_end(bus, ends, procs, scenario, opts, tg, summary, heard)
             raise _Done
     except* _Done:
         pass
@@ -240,7 +254,7 @@ async def _start_all(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
-    planners: tally.PlannerTally,
+    counting: tuple[tally.PlannerTally, Heard],
     launched: RunLaunched,
     login: tuple[str, str],
 ) -> tuple[Bus, asyncio.Queue[RunFinished]]:
@@ -263,19 +277,12 @@ async def _start_all(
     events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
     tg.create_task(_forward(events, ends))
     # Subscribed before any agent starts, so the tally misses none of their messages.
-    tg.create_task(count_plans(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
-    act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
-    tg.create_task(
-        count_actions(
-            inputs(
-                bus,
-                [keys.CLOCK, act, keys.executor_status("*")],
-                (Tick, ActionRequest, ActionStatus),
-                LogSink(),
-            ),
-            summary,
-        )
-    )
+    planners, heard = counting
+    plans = sequenced_inputs(bus, tally.KEYS, tally.MESSAGES, LogSink())
+    tg.create_task(count_plans(plans, planners, heard))
+    acts = [keys.CLOCK, ACTS, keys.executor_status("*")]
+    actions = sequenced_inputs(bus, acts, (Tick, ActionRequest, ActionStatus), LogSink())
+    tg.create_task(count_actions(actions, summary, heard))
     if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
         from cbdi.view import text_view
 
@@ -364,8 +371,10 @@ async def _await_end(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
+    heard: Heard,
 ) -> None:
     ended: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+    counted = counted_keys([a.name for a in scenario.agents])
 
     def end(reason: str) -> None:
         if not ended.done():
@@ -381,6 +390,11 @@ async def _await_end(
             summary.lateness = (
                 {f: getattr(late, f) for f in late.__struct_fields__} if late else None
             )
+            # Lockstep: the members' last messages were sent before the world's word,
+            # on other keys, so they may come after it; the counts wait for them.
+            missing = await heard.cover(msg.sent, counted, COVER_TIMEOUT)
+            if missing:
+                procs[0].sink("launcher", f"counted short at the end: {missing}")
             end(msg.reason)
 
     async def failure(proc: ManagedProcess) -> None:

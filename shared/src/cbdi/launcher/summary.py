@@ -3,6 +3,8 @@ each agent's action requests, the world's statistics, the run's end."""
 
 from __future__ import annotations
 
+import asyncio
+import bisect
 import contextlib
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -11,13 +13,22 @@ from typing import Any
 from cbdi import keys, tally
 from cbdi.bus import request
 from cbdi.bus.base import Bus
+from cbdi.bus.typed import Stamped
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import Scenario
 from cbdi.wire.agent import ActionStatus
-from cbdi.wire.base import Message
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
 
-__all__ = ["RunSummary", "collect_stats", "count_actions", "count_plans", "settle"]
+__all__ = [
+    "ACTS",
+    "Heard",
+    "RunSummary",
+    "collect_stats",
+    "count_actions",
+    "count_plans",
+    "counted_keys",
+    "settle",
+]
 
 
 @dataclass
@@ -62,23 +73,91 @@ class RunSummary:
         return self.result in ("done", "time_limit")
 
 
+ACTS = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
+
+
+class Heard:
+    """The last sequence number heard on each key a counter counted, and a wait for the
+    rest: what `RunFinished.sent` says was published by the end."""
+
+    def __init__(self) -> None:
+        self.seq: dict[str, int] = {}
+        self._news = asyncio.Event()
+
+    def note(self, key: str, seq: int) -> None:
+        self.seq[key] = max(self.seq.get(key, 0), seq)
+        self._news.set()
+
+    def missing(self, sent: dict[str, int], counted: frozenset[str]) -> dict[str, int]:
+        """Return, of the `counted` keys in `sent`, those with fewer messages heard."""
+        return {k: n for k, n in sent.items() if k in counted and self.seq.get(k, 0) < n}
+
+    async def cover(
+        self, sent: dict[str, int], counted: frozenset[str], timeout: float
+    ) -> dict[str, int]:
+        """Wait (`timeout` wall seconds at most) until every counted key of `sent` is
+        heard in full; return what is still missing."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout):
+                while self.missing(sent, counted):
+                    self._news.clear()
+                    await self._news.wait()
+        return self.missing(sent, counted)
+
+
+def counted_keys(agents: list[str]) -> frozenset[str]:
+    """Return the keys `count_plans` and `count_actions` count for `agents`."""
+    per_agent = (
+        keys.planner_requests,
+        keys.planner_plans,
+        keys.planner_rounds,
+        keys.planner_forecasts,
+        keys.executor_status,
+    )
+    return frozenset([keys.CLOCK, ACTS, *(key(a) for a in agents for key in per_agent)])
+
+
 async def count_plans(
-    stream: AsyncIterator[tuple[str, Message]], planners: tally.PlannerTally
+    stream: AsyncIterator[Stamped], planners: tally.PlannerTally, heard: Heard
 ) -> None:
     """Count the planners' plans, replans, repairs and rounds as they are published."""
-    async for key, msg in stream:
+    async for key, seq, _, msg in stream:
         planners.observe(key, msg)
+        heard.note(key, seq)
 
 
-async def count_actions(stream: AsyncIterator[tuple[str, Message]], summary: RunSummary) -> None:
+class _TickTimes:
+    """The simulated time of the world's ticks by the world's publication number
+    (`Stamped.order`): the time at which the world served a request it mirrored, whichever
+    of the tick and the request arrived first (they travel on two keys)."""
+
+    def __init__(self) -> None:
+        self.orders: list[int] = []
+        self.times: list[float] = []
+        self.now = 0.0  # by arrival, for samples with no publication number
+
+    def tick(self, order: int, time: float) -> None:
+        self.now = time
+        k = bisect.bisect(self.orders, order)
+        self.orders.insert(k, order)
+        self.times.insert(k, time)
+
+    def at(self, order: int) -> float:
+        """Return the time of the last tick published before `order`."""
+        k = bisect.bisect(self.orders, order)
+        return self.times[k - 1] if order and k else self.now
+
+
+async def count_actions(stream: AsyncIterator[Stamped], summary: RunSummary, heard: Heard) -> None:
     """Count each agent's action requests to the world and note the simulated time of its
     first; and the steps its executor started (`running`), by action name, whoever
     performs them."""
-    now = 0.0
+    ticks = _TickTimes()
+    first: dict[str, tuple[int, float]] = {}  # agent -> (order, arrival time) of its first
     started: set[tuple[str, str]] = set()  # (agent, step id) seen running
-    async for _, msg in stream:
+    async for key, seq, order, msg in stream:
         if isinstance(msg, Tick):
-            now = msg.time
+            ticks.tick(order, msg.time)
         elif isinstance(msg, ActionStatus):
             if msg.status == "running" and (msg.agent, msg.step_id) not in started:
                 started.add((msg.agent, msg.step_id))
@@ -87,8 +166,11 @@ async def count_actions(stream: AsyncIterator[tuple[str, Message]], summary: Run
         elif isinstance(msg, ActionRequest):
             agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
             agent["actions"] += 1
-            if agent["first_action"] is None:
-                agent["first_action"] = now
+            if msg.agent not in first or 0 < order < first[msg.agent][0]:
+                first[msg.agent] = (order, ticks.now)
+        for name, (o, arrived) in first.items():
+            summary.actions[name]["first_action"] = ticks.at(o) if o else arrived
+        heard.note(key, seq)
 
 
 def settle(summary: RunSummary, reason: str, scenario: Scenario) -> None:
