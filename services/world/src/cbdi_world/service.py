@@ -92,6 +92,7 @@ class WorldService:
             simulator=settings.simulator,
         )
         self.finished: RunFinished | None = None
+        self.sent_before: dict[str, int] = {}  # lockstep: RunFinished.sent
         self.lateness = Lateness(self.epoch_wall())
         self.trace = RequestTrace()
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
@@ -324,9 +325,11 @@ class WorldService:
         if late:
             self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
 
-    def own_sent(self) -> dict[str, int]:
-        """Return what the world published so far per key (not its acks' or heartbeats')."""
-        return {k: n for k, n in self.ctx.bus.sent.items() if not keys.is_heartbeat(k)}
+    def sent_so_far(self) -> dict[str, int]:
+        """Return what the world and (by their latest acks) the members published so far,
+        per key; heartbeats aside."""
+        own = {k: n for k, n in self.ctx.bus.sent.items() if not keys.is_heartbeat(k)}
+        return {**self.acks.published(), **own}
 
     def tick_of(self, result: EpochResult) -> Tick:
         return Tick(
@@ -339,6 +342,10 @@ class WorldService:
 
     async def publish_epoch(self, result: EpochResult) -> None:
         bus, w = self.ctx.bus, self.world
+        if self.settings.lockstep:
+            # What went before this epoch (every member acknowledged the last one): if
+            # this epoch ends the run, what its tick sets off is not the run's.
+            self.sent_before = self.sent_so_far()
         tick = self.last_tick = self.tick_of(result)
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
@@ -361,23 +368,15 @@ class WorldService:
         elif s.max_time > 0 and w.time >= s.max_time:
             reason = "time_limit"
         if reason:
-            requests, digest = self.trace.count, self.trace.digest()
-            sent: dict[str, int] = {}
-            if s.lockstep:
-                # The members' part of the last epoch (their plans, steps started, requests
-                # served after the trace's end) is done and sent before the run ends, so
-                # what a listener counts of it does not hang on when it stopped listening.
-                await self.wait_acks(w.epoch)
-                sent = {**self.acks.published(), **self.own_sent()}
             self.finished = RunFinished(
                 reason=reason,
                 epoch=w.epoch,
                 time=w.time,
                 stalls=dict(self.acks.stalls),
-                requests=requests,
-                trace_digest=digest,
+                requests=self.trace.count,
+                trace_digest=self.trace.digest(),
                 lateness=self.lateness.summary(),
-                sent=sent,
+                sent=self.sent_before,
             )
             await publish(self.ctx.bus, keys.world_stream("stats"), w.stats(), block=True)
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)

@@ -43,16 +43,7 @@ from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario, agent_groups
 from cbdi.launcher.services import plan_services
 from cbdi.launcher.specs import run_specs
-from cbdi.launcher.summary import (
-    ACTS,
-    Heard,
-    RunSummary,
-    collect_stats,
-    count_actions,
-    count_plans,
-    counted_keys,
-    settle,
-)
+from cbdi.launcher.summary import ACTS, RunCounts, RunSummary, collect_stats, counted_keys, settle
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
 from cbdi.runtime.parent import NICE_ENV
 from cbdi.security import (
@@ -190,7 +181,7 @@ async def _launch(
     ]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
-    heard = Heard()  # what the counters counted, to wait at the end for what they miss
+    counts = RunCounts(planners)
     memory = MemoryPeaks()
     started = time.monotonic()
     bus: Bus | None = None
@@ -205,9 +196,9 @@ async def _launch(
             )
             login = _login(secrets)
             bus, ends = await _start_all(
-                procs, endpoint, opts, tg, summary, (planners, heard), launched, login
+                procs, endpoint, opts, tg, summary, counts, launched, login
             )
-            await _await_end(bus, ends, procs, scenario, opts, tg, summary, heard)
+            await _await_end(bus, ends, procs, scenario, opts, tg, summary, counts)
             raise _Done
     except* _Done:
         pass
@@ -225,6 +216,7 @@ async def _launch(
             await bus.close()
         shutil.rmtree(state_dir, ignore_errors=True)
     summary.wall_time = round(time.monotonic() - started, 3)
+    counts.fold(summary)
     summary.planner = planners.summary()
     summary.memory = memory.summary()
     for proc in procs:
@@ -254,7 +246,7 @@ async def _start_all(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
-    counting: tuple[tally.PlannerTally, Heard],
+    counts: RunCounts,
     launched: RunLaunched,
     login: tuple[str, str],
 ) -> tuple[Bus, asyncio.Queue[RunFinished]]:
@@ -277,12 +269,10 @@ async def _start_all(
     events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
     tg.create_task(_forward(events, ends))
     # Subscribed before any agent starts, so the tally misses none of their messages.
-    planners, heard = counting
-    plans = sequenced_inputs(bus, tally.KEYS, tally.MESSAGES, LogSink())
-    tg.create_task(count_plans(plans, planners, heard))
+    tg.create_task(counts.listen(sequenced_inputs(bus, tally.KEYS, tally.MESSAGES, LogSink())))
     acts = [keys.CLOCK, ACTS, keys.executor_status("*")]
     actions = sequenced_inputs(bus, acts, (Tick, ActionRequest, ActionStatus), LogSink())
-    tg.create_task(count_actions(actions, summary, heard))
+    tg.create_task(counts.listen(actions))
     if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
         from cbdi.view import text_view
 
@@ -371,7 +361,7 @@ async def _await_end(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
-    heard: Heard,
+    counts: RunCounts,
 ) -> None:
     ended: asyncio.Future[str] = asyncio.get_running_loop().create_future()
     counted = counted_keys([a.name for a in scenario.agents])
@@ -390,9 +380,7 @@ async def _await_end(
             summary.lateness = (
                 {f: getattr(late, f) for f in late.__struct_fields__} if late else None
             )
-            # Lockstep: the members' last messages were sent before the world's word,
-            # on other keys, so they may come after it; the counts wait for them.
-            missing = await heard.cover(msg.sent, counted, COVER_TIMEOUT)
+            missing = await counts.cover(msg.sent, counted, COVER_TIMEOUT)
             if missing:
                 procs[0].sink("launcher", f"counted short at the end: {missing}")
             end(msg.reason)

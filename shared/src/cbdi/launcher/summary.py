@@ -19,16 +19,7 @@ from cbdi.launcher.scenario import Scenario
 from cbdi.wire.agent import ActionStatus
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
 
-__all__ = [
-    "ACTS",
-    "Heard",
-    "RunSummary",
-    "collect_stats",
-    "count_actions",
-    "count_plans",
-    "counted_keys",
-    "settle",
-]
+__all__ = ["ACTS", "RunCounts", "RunSummary", "collect_stats", "counted_keys", "settle"]
 
 
 @dataclass
@@ -76,37 +67,8 @@ class RunSummary:
 ACTS = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
 
 
-class Heard:
-    """The last sequence number heard on each key a counter counted, and a wait for the
-    rest: what `RunFinished.sent` says was published by the end."""
-
-    def __init__(self) -> None:
-        self.seq: dict[str, int] = {}
-        self._news = asyncio.Event()
-
-    def note(self, key: str, seq: int) -> None:
-        self.seq[key] = max(self.seq.get(key, 0), seq)
-        self._news.set()
-
-    def missing(self, sent: dict[str, int], counted: frozenset[str]) -> dict[str, int]:
-        """Return, of the `counted` keys in `sent`, those with fewer messages heard."""
-        return {k: n for k, n in sent.items() if k in counted and self.seq.get(k, 0) < n}
-
-    async def cover(
-        self, sent: dict[str, int], counted: frozenset[str], timeout: float
-    ) -> dict[str, int]:
-        """Wait (`timeout` wall seconds at most) until every counted key of `sent` is
-        heard in full; return what is still missing."""
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(timeout):
-                while self.missing(sent, counted):
-                    self._news.clear()
-                    await self._news.wait()
-        return self.missing(sent, counted)
-
-
 def counted_keys(agents: list[str]) -> frozenset[str]:
-    """Return the keys `count_plans` and `count_actions` count for `agents`."""
+    """Return the keys `RunCounts` counts for `agents`."""
     per_agent = (
         keys.planner_requests,
         keys.planner_plans,
@@ -117,13 +79,74 @@ def counted_keys(agents: list[str]) -> frozenset[str]:
     return frozenset([keys.CLOCK, ACTS, *(key(a) for a in agents for key in per_agent)])
 
 
-async def count_plans(
-    stream: AsyncIterator[Stamped], planners: tally.PlannerTally, heard: Heard
-) -> None:
-    """Count the planners' plans, replans, repairs and rounds as they are published."""
-    async for key, seq, _, msg in stream:
-        planners.observe(key, msg)
-        heard.note(key, seq)
+class RunCounts:
+    """Count what the agents did: the planners' plans, replans, repairs and rounds
+    (`cbdi.tally`), each agent's action requests to the world and the simulated time of
+    its first, and the steps its executor started (`running`), by action name, whoever
+    performs them.
+
+    The messages are kept as they come and counted at the end (`fold`), in lockstep up to
+    what the world says was sent before its last epoch (`RunFinished.sent`): what the
+    members do on the last tick, while the run ends, is not the run's, and only a cut by
+    sequence numbers, not by arrival, makes the counts repeat.
+    """
+
+    def __init__(self, planners: tally.PlannerTally) -> None:
+        self.planners = planners
+        self.samples: list[Stamped] = []
+        self.heard: dict[str, int] = {}  # the last sequence number heard, per key
+        self.upto: dict[str, int] = {}  # the cut: RunFinished.sent (empty: none)
+        self._news = asyncio.Event()
+
+    async def listen(self, stream: AsyncIterator[Stamped]) -> None:
+        """Keep every message of `stream` until cancelled."""
+        async for sample in stream:
+            self.samples.append(sample)
+            self.heard[sample.key] = max(self.heard.get(sample.key, 0), sample.seq)
+            self._news.set()
+
+    def missing(self, sent: dict[str, int], counted: frozenset[str]) -> dict[str, int]:
+        """Return, of the `counted` keys in `sent`, those with fewer messages heard."""
+        return {k: n for k, n in sent.items() if k in counted and self.heard.get(k, 0) < n}
+
+    async def cover(
+        self, sent: dict[str, int], counted: frozenset[str], timeout: float
+    ) -> dict[str, int]:
+        """Cut the counts at `sent` and wait (`timeout` wall seconds at most) until every
+        counted key of it is heard in full: its messages travel on other keys than the
+        world's last word and may come after it. Return what is still missing."""
+        self.upto = dict(sent)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout):
+                while self.missing(sent, counted):
+                    self._news.clear()
+                    await self._news.wait()
+        return self.missing(sent, counted)
+
+    def fold(self, summary: RunSummary) -> None:
+        """Count the messages kept (up to the cut, if any) into `summary` and the tally."""
+        ticks = _TickTimes()
+        first: dict[str, tuple[int, float]] = {}  # agent -> (order, arrival time) of its first
+        started: set[tuple[str, str]] = set()  # (agent, step id) seen running
+        for key, seq, order, msg in self.samples:
+            if self.upto and seq > self.upto.get(key, 0):
+                continue  # sent on the last tick, or after
+            if isinstance(msg, Tick):
+                ticks.tick(order, msg.time)
+            elif isinstance(msg, ActionStatus):
+                if msg.status == "running" and (msg.agent, msg.step_id) not in started:
+                    started.add((msg.agent, msg.step_id))
+                    by_name = summary.performed.setdefault(msg.agent, {})
+                    by_name[msg.action] = by_name.get(msg.action, 0) + 1
+            elif isinstance(msg, ActionRequest):
+                agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
+                agent["actions"] += 1
+                if msg.agent not in first or 0 < order < first[msg.agent][0]:
+                    first[msg.agent] = (order, ticks.now)
+            else:
+                self.planners.observe(key, msg)
+        for name, (o, arrived) in first.items():
+            summary.actions[name]["first_action"] = ticks.at(o) if o else arrived
 
 
 class _TickTimes:
@@ -146,31 +169,6 @@ class _TickTimes:
         """Return the time of the last tick published before `order`."""
         k = bisect.bisect(self.orders, order)
         return self.times[k - 1] if order and k else self.now
-
-
-async def count_actions(stream: AsyncIterator[Stamped], summary: RunSummary, heard: Heard) -> None:
-    """Count each agent's action requests to the world and note the simulated time of its
-    first; and the steps its executor started (`running`), by action name, whoever
-    performs them."""
-    ticks = _TickTimes()
-    first: dict[str, tuple[int, float]] = {}  # agent -> (order, arrival time) of its first
-    started: set[tuple[str, str]] = set()  # (agent, step id) seen running
-    async for key, seq, order, msg in stream:
-        if isinstance(msg, Tick):
-            ticks.tick(order, msg.time)
-        elif isinstance(msg, ActionStatus):
-            if msg.status == "running" and (msg.agent, msg.step_id) not in started:
-                started.add((msg.agent, msg.step_id))
-                by_name = summary.performed.setdefault(msg.agent, {})
-                by_name[msg.action] = by_name.get(msg.action, 0) + 1
-        elif isinstance(msg, ActionRequest):
-            agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
-            agent["actions"] += 1
-            if msg.agent not in first or 0 < order < first[msg.agent][0]:
-                first[msg.agent] = (order, ticks.now)
-        for name, (o, arrived) in first.items():
-            summary.actions[name]["first_action"] = ticks.at(o) if o else arrived
-        heard.note(key, seq)
 
 
 def settle(summary: RunSummary, reason: str, scenario: Scenario) -> None:
