@@ -82,6 +82,8 @@ def test_three_robots_repeat_exactly_under_load() -> None:
     first, again = (comparable(r) for r in runs)
     assert first == again, differences(first, again)
     assert first["result"] == "done" and first["planner"]["total"]["replans"] > 0
+    # Counted up to the last tick: every action asked is in the world's trace.
+    assert sum(a["actions"] for a in first["actions"].values()) == first["requests"]
     assert sum(1 for a in first["actions"].values() if a["actions"] > 0) == 3
 
 

@@ -72,6 +72,16 @@ async def test_what_the_last_tick_set_off_is_not_counted_whenever_it_came() -> N
     assert everything.actions[A]["actions"] == 2  # no cut: a run that did not end (failed)
 
 
+async def test_the_cut_is_of_a_restarted_senders_last_life() -> None:
+    """An executor restarted numbers its messages afresh: the run's end cuts its new
+    life's, and what its first life sent all counts."""
+    first_life = [running(n, f"p1-{n}") for n in (1, 2, 3)]
+    second_life = [running(n, f"p2-{n}") for n in (1, 2)]
+    upto = {keys.executor_status(A): 1}
+    summary = await counted(*first_life, *second_life, upto=upto)
+    assert summary.performed == {A: {"move": 4}}
+
+
 async def test_the_counts_wait_for_what_the_run_says_was_sent() -> None:
     counts, counted_keys_ = RunCounts(tally.PlannerTally()), counted_keys([A])
     status = keys.executor_status(A)

@@ -88,21 +88,27 @@ class RunCounts:
     The messages are kept as they come and counted at the end (`fold`), in lockstep up to
     what the world says was sent before its last epoch (`RunFinished.sent`): what the
     members do on the last tick, while the run ends, is not the run's, and only a cut by
-    sequence numbers, not by arrival, makes the counts repeat.
+    sequence numbers, not by arrival, makes the counts repeat. A sender whose numbers on
+    a key go back has restarted (as `cbdi.lockstep` tells): the cut is of its last life,
+    what its earlier lives sent all counts.
     """
 
     def __init__(self, planners: tally.PlannerTally) -> None:
         self.planners = planners
-        self.samples: list[Stamped] = []
+        self.samples: list[tuple[int, Stamped]] = []  # (its sender's life, the message)
         self.heard: dict[str, int] = {}  # the last sequence number heard, per key
+        self.lives: dict[str, int] = {}  # the life of the key's sender (0: the first)
         self.upto: dict[str, int] = {}  # the cut: RunFinished.sent (empty: none)
         self._news = asyncio.Event()
 
     async def listen(self, stream: AsyncIterator[Stamped]) -> None:
         """Keep every message of `stream` until cancelled."""
         async for sample in stream:
-            self.samples.append(sample)
-            self.heard[sample.key] = max(self.heard.get(sample.key, 0), sample.seq)
+            key = sample.key
+            if sample.seq and sample.seq <= self.heard.get(key, 0):
+                self.lives[key] = self.lives.get(key, 0) + 1  # numbered afresh: restarted
+            self.heard[key] = sample.seq
+            self.samples.append((self.lives.get(key, 0), sample))
             self._news.set()
 
     def missing(self, sent: dict[str, int], counted: frozenset[str]) -> dict[str, int]:
@@ -128,8 +134,8 @@ class RunCounts:
         ticks = _TickTimes()
         first: dict[str, tuple[int, float]] = {}  # agent -> (order, arrival time) of its first
         started: set[tuple[str, str]] = set()  # (agent, step id) seen running
-        for key, seq, order, msg in self.samples:
-            if self.upto and seq > self.upto.get(key, 0):
+        for life, (key, seq, order, msg) in self.samples:
+            if self.upto and life == self.lives.get(key, 0) and seq > self.upto.get(key, 0):
                 continue  # sent on the last tick, or after
             if isinstance(msg, Tick):
                 ticks.tick(order, msg.time)
