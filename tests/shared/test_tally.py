@@ -22,7 +22,13 @@ def request(kind: str, desire: str = "recycle", rid: str = "s1") -> tuple[str, M
 
 
 def plan(
-    plan_id: str, baseline: str = "", steps: int = 2, after: str = "", complete: bool = False
+    plan_id: str,
+    baseline: str = "",
+    steps: int = 2,
+    after: str = "",
+    complete: bool = False,
+    rid: str = "",
+    purpose: str = "",
 ) -> tuple[str, Message]:
     msg = PartialPlan(
         agent=A,
@@ -31,6 +37,8 @@ def plan(
         steps=[step(plan_id, i + 1) for i in range(steps)],
         complete=complete,
         applies_after=after,
+        request_id=rid,
+        purpose=purpose,
     )
     return keys.planner_plans(A), msg
 
@@ -118,6 +126,35 @@ def test_offline_plans_after_the_first_of_an_intention_are_replans() -> None:
     c = tally.counts(A)
     assert (c.plans, c.replans, c.search_rounds, c.forecast_repairs) == (4, 2, 0, 0)
     assert c.replans_by == {"new": 1, "repair": 0, "revise": 1, "improve": 0}
+
+
+def test_a_plan_counts_in_its_requests_intention_whichever_arrives_first() -> None:
+    """The scheduler's requests and the planner's plans come from two senders: a plan
+    may arrive before the request it answers, or after the next one."""
+    first = [request("start", rid="s1"), plan("p1", rid="s1", purpose="new")]
+    repair = [plan("p2", "p1-1", after="p1-1", rid="s1", purpose="repair")]
+    home = [
+        request("cancel", rid="s1"),
+        request("start", desire="go_home", rid="s2"),
+        plan("p3", rid="s2", purpose="new"),
+    ]
+    in_order = fold(*first, *repair, *home)
+    # The repair overtaken by the next intention's requests; the new plan overtaking its
+    # own request.
+    shuffled = fold(*first, home[0], home[2], home[1], *repair)
+    for tally in (in_order, shuffled):
+        c = tally.counts(A)
+        assert (c.plans, c.replans, c.forecast_repairs) == (3, 1, 1)
+        assert c.replans_by == {"new": 0, "repair": 1, "revise": 0, "improve": 0}
+    line = shuffled.line(A, "p3")
+    assert line is not None and not line.replan
+
+
+def test_an_offline_plan_says_its_purpose() -> None:
+    revise = request("revise", rid="s1")
+    tally = fold(request("start"), plan("p1", rid="s1", purpose="new"), revise)
+    tally.observe(*plan("p2", rid="s1", purpose="new"))  # searched before the revise came
+    assert tally.counts(A).replans_by == {"new": 1, "repair": 0, "revise": 0, "improve": 0}
 
 
 def test_a_round_after_its_plan_still_names_the_purpose() -> None:

@@ -14,7 +14,8 @@ from cbdi import keys
 from cbdi.bus import LogSink, MemoryBus, messages
 from cbdi.runtime.log import Log
 from cbdi.runtime.service import ServiceContext
-from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, Tick
+from cbdi.wire.common import RunFinished
+from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, EpochAck, Tick
 from cbdi_world.recovery import Keeper
 from cbdi_world.service import WorldService, WorldSettings, build_world
 from tests_support import REPO
@@ -23,7 +24,12 @@ MAP = str(REPO / "domains/recycling/maps/paper-7x7.toml")
 
 
 def host(
-    state: Path, bus: MemoryBus, out: io.StringIO, restart: int = 0, lockstep: bool = True
+    state: Path,
+    bus: MemoryBus,
+    out: io.StringIO,
+    restart: int = 0,
+    lockstep: bool = True,
+    max_time: float = 0.0,
 ) -> WorldService:
     settings = WorldSettings(
         simulator="recycling",
@@ -33,6 +39,7 @@ def host(
         state_every=5,
         restart=restart,
         lockstep=lockstep,
+        max_time=max_time,
     )
     ctx = ServiceContext("world", bus, Log("world", stream=out), settings)
     keeper = Keeper(state, ctx.log)
@@ -87,6 +94,30 @@ async def test_a_restart_replays_what_followed_the_save_and_publishes_what_did_n
     _, tick = await anext(ticks)
     assert tick.epoch == 8 and "event=recovered" in out.getvalue()
     assert "replay_differs" not in out.getvalue()
+
+
+async def test_a_lockstep_run_says_what_was_sent_before_its_last_epoch(
+    tmp_path: Path,
+) -> None:
+    """`RunFinished.sent`: the world's own counts and the members' acks of the epoch
+    before the last, not what the last tick set off (an ack of it, a request served after
+    the world was done), however quickly that came."""
+    bus = MemoryBus()
+    ended = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
+    world = host(tmp_path / "world.state", bus, io.StringIO(), max_time=2.0)
+    status = keys.executor_status("robot1")
+    await world.advance(world.world.initial())
+    x, y = world.world.agents["robot1"].cell  # type: ignore[attr-defined]
+    await world.on_act("act", move("robot1-1", (x + 1, y)))
+    await world.acks.observe(EpochAck(agent="robot1", epoch=0, sent={status: 3}))
+    await world.advance(world.world.step())
+    await world.acks.observe(EpochAck(agent="robot1", epoch=1, sent={status: 5}))
+    await world.advance(world.world.step())  # epoch 2: time is up
+    await world.acks.observe(EpochAck(agent="robot1", epoch=2, sent={status: 9}))
+    await world.on_act("act", move("robot1-2", (x, y)))  # set off by the last tick
+    _, last = await anext(ended)
+    assert (last.reason, last.epoch, last.requests) == ("time_limit", 2, 1)
+    assert last.sent[status] == 5 and last.sent[keys.CLOCK] == 2  # ticks of epochs 0 and 1
 
 
 async def test_an_ack_seen_before_the_state_file_is_read_is_not_taken_back(

@@ -15,11 +15,17 @@ Definitions, per agent:
   request for another desire than the current one, or with the first request after a
   `cancel` (the desire achieved, dropped or preempted). A `start` for the same desire (a
   step failed or was refused, a failed search is retried) or a `revise` stays in it.
+  A plan belongs to the intention of the request it answers (`PartialPlan.request_id`),
+  whenever each of them arrives: the requests come from the scheduler and the plans
+  from the planner, and the bus keeps no order between two senders. A plan that names
+  no request (a recording made before plans did) belongs to the intention open when it
+  arrived.
 - `replans`: plans published after the first plan of their intention. Online: repairs,
   revised goals, improvements and fresh searches after a failed step; offline: every plan
-  after the first. `replans_by` splits them by purpose: the purpose of the plan id's
-  search rounds (`new`, `repair`, `revise`, `improve`); offline plans have no rounds, so
-  `revise` after a revise request, `new` otherwise.
+  after the first. `replans_by` splits them by purpose: the plan's own
+  (`PartialPlan.purpose`), else its search rounds' (`new`, `repair`, `revise`,
+  `improve`), else (an offline plan of an old recording) `revise` after a revise
+  request, `new` otherwise.
 - `forecast_repairs`: repair plans published, that is `fails_after_committed` forecasts
   that led to a repair plan. Each repair search starts from one such forecast; a repair
   search that fails or is outdated publishes no plan and is not counted (the forecast
@@ -86,6 +92,7 @@ class PlanLine:
     applies_after: str
     steps: int = 0
     complete: bool = False
+    request_id: str = ""  # the request it answers ("": not said)
 
     @property
     def kind(self) -> str:
@@ -133,7 +140,7 @@ class _Agent:
     intention: int = 0
     desire: str | None = None  # None: no intention open
     last_request: str = ""
-    in_intention: int = 0  # plans of the current intention so far
+    intention_of: dict[str, int] = field(default_factory=dict)  # request id -> intention
     lines: dict[str, PlanLine] = field(default_factory=dict)  # by plan id, latest wins
     order: list[PlanLine] = field(default_factory=list)
     purposes: dict[str, str] = field(default_factory=dict)  # plan id -> purpose of its rounds
@@ -180,6 +187,7 @@ class PlannerTally:
     def counts(self, agent: str) -> PlannerCounts:
         """Return `agent`'s counts (zeros for an agent never heard of)."""
         state = self._agents.get(agent) or _Agent()
+        self._classify(state)
         out = PlannerCounts()
         out.add(state.rounds)
         out.plans = len(state.order)
@@ -216,8 +224,9 @@ class PlannerTally:
             return
         if state.desire is None or (req.kind == "start" and req.desire != state.desire):
             state.intention += 1
-            state.in_intention = 0
         state.desire, state.last_request = req.desire, req.kind
+        if req.kind == "start" or req.request_id not in state.intention_of:
+            state.intention_of[req.request_id] = state.intention  # a revise keeps its id's
 
     @staticmethod
     def _plan(state: _Agent, plan: PartialPlan) -> PlanLine | None:
@@ -231,17 +240,28 @@ class PlannerTally:
             agent=plan.agent,
             plan_id=plan.plan_id,
             intention=state.intention,
-            replan=state.in_intention > 0,
-            purpose=state.purposes.get(plan.plan_id, ""),
+            replan=False,
+            purpose=plan.purpose or state.purposes.get(plan.plan_id, ""),
             fallback="revise" if state.last_request == "revise" else "new",
             applies_after=plan.applies_after,
             steps=len(plan.steps),
             complete=plan.complete,
+            request_id=plan.request_id,
         )
-        state.in_intention += 1
         state.lines[plan.plan_id] = line
         state.order.append(line)
+        PlannerTally._classify(state)
         return line
+
+    @staticmethod
+    def _classify(state: _Agent) -> None:
+        """Put each plan in its request's intention (if both are known) and mark the
+        plans after the first of an intention as replans, in the planner's order."""
+        planned: set[int] = set()
+        for line in state.order:
+            line.intention = state.intention_of.get(line.request_id, line.intention)
+            line.replan = line.intention in planned
+            planned.add(line.intention)
 
     @staticmethod
     def _round(state: _Agent, r: SearchRound) -> None:

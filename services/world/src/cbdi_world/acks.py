@@ -49,6 +49,7 @@ class AckTracker:
         self.acked: dict[str, tuple[int, int]] = {m: (-2, 0) for m in members}
         self.behind: dict[str, int] = {}  # member -> the epoch it missed
         self.stalls: Counter[str] = Counter()
+        self.sent: dict[str, dict[str, int]] = {}  # member -> its latest ack's counts
         self.changed = asyncio.Condition()
 
     async def observe(self, ack: EpochAck) -> None:
@@ -58,11 +59,21 @@ class AckTracker:
             return
         async with self.changed:
             mark = (ack.epoch, stage_rank(ack.stage))
+            if mark >= self.acked[member]:
+                self.sent[member] = dict(ack.sent)
             self.acked[member] = max(self.acked[member], mark)
             missed = self.behind.get(member)
             if missed is not None and ack.epoch >= missed:
                 del self.behind[member]  # caught up: waited for again
             self.changed.notify_all()
+
+    def published(self) -> dict[str, int]:
+        """Return what the members' latest acks say they had sent, per key."""
+        out: dict[str, int] = {}
+        for counts in self.sent.values():
+            for key, n in counts.items():
+                out[key] = max(out.get(key, 0), n)
+        return out
 
     def waiting_for(self, epoch: int, stage: str) -> list[str]:
         """Members (not behind) that have not acknowledged `epoch` at `stage` yet."""

@@ -92,6 +92,7 @@ class WorldService:
             simulator=settings.simulator,
         )
         self.finished: RunFinished | None = None
+        self.sent_before: dict[str, int] = {}  # lockstep: RunFinished.sent
         self.lateness = Lateness(self.epoch_wall())
         self.trace = RequestTrace()
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
@@ -324,6 +325,12 @@ class WorldService:
         if late:
             self.ctx.log.warning("ack_timeout", epoch=epoch, late=",".join(late))
 
+    def sent_so_far(self) -> dict[str, int]:
+        """Return what the world and (by their latest acks) the members published so far,
+        per key; heartbeats aside."""
+        own = {k: n for k, n in self.ctx.bus.sent.items() if not keys.is_heartbeat(k)}
+        return {**self.acks.published(), **own}
+
     def tick_of(self, result: EpochResult) -> Tick:
         return Tick(
             epoch=result.epoch,
@@ -335,6 +342,10 @@ class WorldService:
 
     async def publish_epoch(self, result: EpochResult) -> None:
         bus, w = self.ctx.bus, self.world
+        if self.settings.lockstep:
+            # What went before this epoch (every member acknowledged the last one): if
+            # this epoch ends the run, what its tick sets off is not the run's.
+            self.sent_before = self.sent_so_far()
         tick = self.last_tick = self.tick_of(result)
         await publish(bus, keys.world_stream("clock"), tick, block=True)
         for outcome in result.outcomes:
@@ -365,6 +376,7 @@ class WorldService:
                 requests=self.trace.count,
                 trace_digest=self.trace.digest(),
                 lateness=self.lateness.summary(),
+                sent=self.sent_before,
             )
             await publish(self.ctx.bus, keys.world_stream("stats"), w.stats(), block=True)
             await publish(self.ctx.bus, keys.world_stream("events"), self.finished, block=True)

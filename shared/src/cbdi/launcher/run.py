@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cbdi import keys, tally
-from cbdi.bus import BusConfig, LogSink, inputs, messages, open_bus, publish
+from cbdi.bus import BusConfig, LogSink, messages, open_bus, publish
 from cbdi.bus.base import Bus
+from cbdi.bus.typed import sequenced_inputs
 from cbdi.clock import WallClock
 from cbdi.errors import CbdiError
 from cbdi.launcher.liveness import Watchdog
@@ -42,7 +43,7 @@ from cbdi.launcher.process import ManagedProcess, ProcessSpec, RestartPolicy
 from cbdi.launcher.scenario import AGENT_KINDS, Scenario, agent_groups
 from cbdi.launcher.services import plan_services
 from cbdi.launcher.specs import run_specs
-from cbdi.launcher.summary import RunSummary, collect_stats, count_actions, count_plans, settle
+from cbdi.launcher.summary import ACTS, RunCounts, RunSummary, collect_stats, counted_keys, settle
 from cbdi.launcher.watch import TICK, watch_heartbeats, watch_processes
 from cbdi.runtime.parent import NICE_ENV
 from cbdi.security import (
@@ -62,6 +63,9 @@ __all__ = ["ROUTER_NOT_LISTENING", "LaunchOptions", "RunSummary", "launch"]
 # How a run that never started because its router could not take its port is told
 # (`run.reason` begins with it): nothing ran, the same run may be tried on another port.
 ROUTER_NOT_LISTENING = "our router could not listen on"
+# Wall seconds the counters get, once the run ended, to hear the messages it says were
+# sent (`RunFinished.sent`): they are on their way, so it takes a moment even when loaded.
+COVER_TIMEOUT = 10.0
 
 
 @dataclass(frozen=True)
@@ -177,6 +181,7 @@ async def _launch(
     ]
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
+    counts = RunCounts(planners)
     memory = MemoryPeaks()
     started = time.monotonic()
     bus: Bus | None = None
@@ -191,9 +196,9 @@ async def _launch(
             )
             login = _login(secrets)
             bus, ends = await _start_all(
-                procs, endpoint, opts, tg, summary, planners, launched, login
+                procs, endpoint, opts, tg, summary, counts, launched, login
             )
-            await _await_end(bus, ends, procs, scenario, opts, tg, summary)
+            await _await_end(bus, ends, procs, scenario, opts, tg, summary, counts)
             raise _Done
     except* _Done:
         pass
@@ -211,6 +216,7 @@ async def _launch(
             await bus.close()
         shutil.rmtree(state_dir, ignore_errors=True)
     summary.wall_time = round(time.monotonic() - started, 3)
+    counts.fold(summary)
     summary.planner = planners.summary()
     summary.memory = memory.summary()
     for proc in procs:
@@ -240,7 +246,7 @@ async def _start_all(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
-    planners: tally.PlannerTally,
+    counts: RunCounts,
     launched: RunLaunched,
     login: tuple[str, str],
 ) -> tuple[Bus, asyncio.Queue[RunFinished]]:
@@ -263,19 +269,10 @@ async def _start_all(
     events = messages(bus, keys.world_stream("events"), RunFinished, LogSink())
     tg.create_task(_forward(events, ends))
     # Subscribed before any agent starts, so the tally misses none of their messages.
-    tg.create_task(count_plans(inputs(bus, tally.KEYS, tally.MESSAGES, LogSink()), planners))
-    act = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
-    tg.create_task(
-        count_actions(
-            inputs(
-                bus,
-                [keys.CLOCK, act, keys.executor_status("*")],
-                (Tick, ActionRequest, ActionStatus),
-                LogSink(),
-            ),
-            summary,
-        )
-    )
+    tg.create_task(counts.listen(sequenced_inputs(bus, tally.KEYS, tally.MESSAGES, LogSink())))
+    acts = [keys.CLOCK, ACTS, keys.executor_status("*")]
+    actions = sequenced_inputs(bus, acts, (Tick, ActionRequest, ActionStatus), LogSink())
+    tg.create_task(counts.listen(actions))
     if opts.view == "text":  # subscribed now too: it shows what agents intend from the start
         from cbdi.view import text_view
 
@@ -364,8 +361,10 @@ async def _await_end(
     opts: LaunchOptions,
     tg: asyncio.TaskGroup,
     summary: RunSummary,
+    counts: RunCounts,
 ) -> None:
     ended: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+    counted = counted_keys([a.name for a in scenario.agents])
 
     def end(reason: str) -> None:
         if not ended.done():
@@ -381,6 +380,9 @@ async def _await_end(
             summary.lateness = (
                 {f: getattr(late, f) for f in late.__struct_fields__} if late else None
             )
+            missing = await counts.cover(msg.sent, counted, COVER_TIMEOUT)
+            if missing:
+                procs[0].sink("launcher", f"counted short at the end: {missing}")
             end(msg.reason)
 
     async def failure(proc: ManagedProcess) -> None:

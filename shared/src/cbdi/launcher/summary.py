@@ -3,6 +3,8 @@ each agent's action requests, the world's statistics, the run's end."""
 
 from __future__ import annotations
 
+import asyncio
+import bisect
 import contextlib
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -11,13 +13,13 @@ from typing import Any
 from cbdi import keys, tally
 from cbdi.bus import request
 from cbdi.bus.base import Bus
+from cbdi.bus.typed import Stamped
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import Scenario
 from cbdi.wire.agent import ActionStatus
-from cbdi.wire.base import Message
 from cbdi.wire.world import ActionRequest, StatsRequest, Tick, WorldStats
 
-__all__ = ["RunSummary", "collect_stats", "count_actions", "count_plans", "settle"]
+__all__ = ["ACTS", "RunCounts", "RunSummary", "collect_stats", "counted_keys", "settle"]
 
 
 @dataclass
@@ -62,33 +64,117 @@ class RunSummary:
         return self.result in ("done", "time_limit")
 
 
-async def count_plans(
-    stream: AsyncIterator[tuple[str, Message]], planners: tally.PlannerTally
-) -> None:
-    """Count the planners' plans, replans, repairs and rounds as they are published."""
-    async for key, msg in stream:
-        planners.observe(key, msg)
+ACTS = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
 
 
-async def count_actions(stream: AsyncIterator[tuple[str, Message]], summary: RunSummary) -> None:
-    """Count each agent's action requests to the world and note the simulated time of its
-    first; and the steps its executor started (`running`), by action name, whoever
-    performs them."""
-    now = 0.0
-    started: set[tuple[str, str]] = set()  # (agent, step id) seen running
-    async for _, msg in stream:
-        if isinstance(msg, Tick):
-            now = msg.time
-        elif isinstance(msg, ActionStatus):
-            if msg.status == "running" and (msg.agent, msg.step_id) not in started:
-                started.add((msg.agent, msg.step_id))
-                by_name = summary.performed.setdefault(msg.agent, {})
-                by_name[msg.action] = by_name.get(msg.action, 0) + 1
-        elif isinstance(msg, ActionRequest):
-            agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
-            agent["actions"] += 1
-            if agent["first_action"] is None:
-                agent["first_action"] = now
+def counted_keys(agents: list[str]) -> frozenset[str]:
+    """Return the keys `RunCounts` counts for `agents`."""
+    per_agent = (
+        keys.planner_requests,
+        keys.planner_plans,
+        keys.planner_rounds,
+        keys.planner_forecasts,
+        keys.executor_status,
+    )
+    return frozenset([keys.CLOCK, ACTS, *(key(a) for a in agents for key in per_agent)])
+
+
+class RunCounts:
+    """Count what the agents did: the planners' plans, replans, repairs and rounds
+    (`cbdi.tally`), each agent's action requests to the world and the simulated time of
+    its first, and the steps its executor started (`running`), by action name, whoever
+    performs them.
+
+    The messages are kept as they come and counted at the end (`fold`), in lockstep up to
+    what the world says was sent before its last epoch (`RunFinished.sent`): what the
+    members do on the last tick, while the run ends, is not the run's, and only a cut by
+    sequence numbers, not by arrival, makes the counts repeat. A sender whose numbers on
+    a key go back has restarted (as `cbdi.lockstep` tells): the cut is of its last life,
+    what its earlier lives sent all counts.
+    """
+
+    def __init__(self, planners: tally.PlannerTally) -> None:
+        self.planners = planners
+        self.samples: list[tuple[int, Stamped]] = []  # (its sender's life, the message)
+        self.heard: dict[str, int] = {}  # the last sequence number heard, per key
+        self.lives: dict[str, int] = {}  # the life of the key's sender (0: the first)
+        self.upto: dict[str, int] = {}  # the cut: RunFinished.sent (empty: none)
+        self._news = asyncio.Event()
+
+    async def listen(self, stream: AsyncIterator[Stamped]) -> None:
+        """Keep every message of `stream` until cancelled."""
+        async for sample in stream:
+            key = sample.key
+            if sample.seq and sample.seq <= self.heard.get(key, 0):
+                self.lives[key] = self.lives.get(key, 0) + 1  # numbered afresh: restarted
+            self.heard[key] = sample.seq
+            self.samples.append((self.lives.get(key, 0), sample))
+            self._news.set()
+
+    def missing(self, sent: dict[str, int], counted: frozenset[str]) -> dict[str, int]:
+        """Return, of the `counted` keys in `sent`, those with fewer messages heard."""
+        return {k: n for k, n in sent.items() if k in counted and self.heard.get(k, 0) < n}
+
+    async def cover(
+        self, sent: dict[str, int], counted: frozenset[str], timeout: float
+    ) -> dict[str, int]:
+        """Cut the counts at `sent` and wait (`timeout` wall seconds at most) until every
+        counted key of it is heard in full: its messages travel on other keys than the
+        world's last word and may come after it. Return what is still missing."""
+        self.upto = dict(sent)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout):
+                while self.missing(sent, counted):
+                    self._news.clear()
+                    await self._news.wait()
+        return self.missing(sent, counted)
+
+    def fold(self, summary: RunSummary) -> None:
+        """Count the messages kept (up to the cut, if any) into `summary` and the tally."""
+        ticks = _TickTimes()
+        first: dict[str, tuple[int, float]] = {}  # agent -> (order, arrival time) of its first
+        started: set[tuple[str, str]] = set()  # (agent, step id) seen running
+        for life, (key, seq, order, msg) in self.samples:
+            if self.upto and life == self.lives.get(key, 0) and seq > self.upto.get(key, 0):
+                continue  # sent on the last tick, or after
+            if isinstance(msg, Tick):
+                ticks.tick(order, msg.time)
+            elif isinstance(msg, ActionStatus):
+                if msg.status == "running" and (msg.agent, msg.step_id) not in started:
+                    started.add((msg.agent, msg.step_id))
+                    by_name = summary.performed.setdefault(msg.agent, {})
+                    by_name[msg.action] = by_name.get(msg.action, 0) + 1
+            elif isinstance(msg, ActionRequest):
+                agent = summary.actions.setdefault(msg.agent, {"actions": 0, "first_action": None})
+                agent["actions"] += 1
+                if msg.agent not in first or 0 < order < first[msg.agent][0]:
+                    first[msg.agent] = (order, ticks.now)
+            else:
+                self.planners.observe(key, msg)
+        for name, (o, arrived) in first.items():
+            summary.actions[name]["first_action"] = ticks.at(o) if o else arrived
+
+
+class _TickTimes:
+    """The simulated time of the world's ticks by the world's publication number
+    (`Stamped.order`): the time at which the world served a request it mirrored, whichever
+    of the tick and the request arrived first (they travel on two keys)."""
+
+    def __init__(self) -> None:
+        self.orders: list[int] = []
+        self.times: list[float] = []
+        self.now = 0.0  # by arrival, for samples with no publication number
+
+    def tick(self, order: int, time: float) -> None:
+        self.now = time
+        k = bisect.bisect(self.orders, order)
+        self.orders.insert(k, order)
+        self.times.insert(k, time)
+
+    def at(self, order: int) -> float:
+        """Return the time of the last tick published before `order`."""
+        k = bisect.bisect(self.orders, order)
+        return self.times[k - 1] if order and k else self.now
 
 
 def settle(summary: RunSummary, reason: str, scenario: Scenario) -> None:

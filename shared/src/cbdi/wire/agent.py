@@ -108,6 +108,11 @@ class PartialPlan(Message, frozen=True, tag="cbdi.agent.PartialPlan/1"):
     A plan whose baseline is not the executing plan replaces it: the executor finishes
     the executing plan up to step `applies_after` (empty: the step running now) and then
     runs this one.
+
+    `request_id` is the search request the plan answers and `purpose` why it was searched
+    (`new`, `repair`, `revise`, `improve`; empty: not said, as before these fields): a
+    counter of plans (`cbdi.tally`) then ties a plan to its request whatever order the
+    two arrive in, since they come from different senders.
     """
 
     agent: AgentName
@@ -116,6 +121,8 @@ class PartialPlan(Message, frozen=True, tag="cbdi.agent.PartialPlan/1"):
     steps: Many[PlanStep]
     complete: bool = False
     applies_after: Id = ""
+    request_id: Id = ""
+    purpose: Id = ""
 
 
 class ActionStatus(Message, frozen=True, tag="cbdi.agent.ActionStatus/1"):

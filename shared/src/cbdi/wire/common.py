@@ -71,6 +71,11 @@ class RunFinished(Message, frozen=True, tag="cbdi.RunFinished/1"):
     trace_digest: Id = ""
     # Paced runs: how late the epochs went out (wall time: not part of the digest).
     lateness: EpochLateness | None = None
+    # Lockstep: what the world and every member had published before the last epoch, per
+    # key (the members' acks of the epoch before, the world's own counts): a listener that
+    # counts messages counts that many of each key, waiting for the late ones, and not
+    # what the last tick set off while the run ended.
+    sent: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=10_000)] = {}
 
 
 class RunLaunched(Message, frozen=True, tag="cbdi.RunLaunched/1"):

@@ -598,6 +598,8 @@ class ContinualPlanner:
             steps=out_steps,
             complete=complete,
             applies_after=line.applies_after if first == 0 else "",
+            request_id=search.request_id,
+            purpose=search.purpose,
         )
 
     def _round(self, search: Search, r: RoundDone) -> SearchRound:

@@ -265,6 +265,8 @@ class OfflinePlannerService(Epochs):
             applies_after=committed.after,
             steps=steps,
             complete=True,
+            request_id=req.request_id,
+            purpose="revise" if req.kind == "revise" else "new",
         )
         self.ctx.log.info(
             "plan",
