@@ -212,9 +212,20 @@ class SchedulerService:
             if appearance == "reconnected":
                 self.ctx.log.info("bus_reconnected", peer=keys.service_of_alive(event.key))
             elif event.key == planner:
+                if appearance == "first" and self.planner_in_lockstep():
+                    # It subscribed before it said ready, and no epoch (no search) starts
+                    # before that: its first appearance missed nothing, however late the
+                    # event comes. A resend would depend on when it comes (under load a
+                    # replay check failed on one).
+                    continue
                 await self.on_planner()
             else:
                 await self.on_executor(again=appearance == "again")
+
+    def planner_in_lockstep(self) -> bool:
+        """Whether our planner is a member of a lockstep run (known once the map is)."""
+        planner = keys.member(self.agent, "planner")
+        return self.lockstep.lockstep_member is True and planner in self.members
 
     async def on_planner(self) -> None:
         """Send the search in progress again when the planner appears: a request sent
