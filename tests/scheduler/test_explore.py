@@ -49,7 +49,7 @@ def targets(beliefs: BeliefSet) -> list[tuple[str, ...]]:
     return sorted(beliefs.facts_of("explore_target"))
 
 
-def test_the_target_is_the_nearest_unsensed_cell_and_kept_until_sensed() -> None:
+def test_the_target_is_the_nearest_unsensed_cell_and_kept_until_reached() -> None:
     k = RecyclingKnowledge("robot1")
     beliefs = BeliefSet.of(map_beliefs(info()))
     beliefs = k.on_percepts(beliefs, seen(0, (0, 0), [(1, 0), (0, 1)]))
@@ -57,9 +57,24 @@ def test_the_target_is_the_nearest_unsensed_cell_and_kept_until_sensed() -> None
     beliefs = k.on_percepts(beliefs, seen(EXPLORE_AFTER, (0, 0), [(1, 0), (0, 1)]))
     assert targets(beliefs) == [("explore_target", "c_0_2")]  # 2 steps, as (2, 0): by name
     beliefs = k.on_percepts(beliefs, seen(11, (0, 1), [(0, 0), (0, 2)]))
-    assert targets(beliefs) == [("explore_target", "c_1_2")]  # 2 steps; (2, 0) is 3
-    beliefs = k.on_percepts(beliefs, seen(12, (1, 0), [(0, 0), (2, 0)]))
-    assert targets(beliefs) == [("explore_target", "c_1_2")]  # kept until sensed
+    assert targets(beliefs) == [("explore_target", "c_0_2")]  # sensed, not reached: kept
+    beliefs = k.on_percepts(beliefs, seen(12, (0, 2), [(0, 1), (1, 2)]))
+    assert targets(beliefs) == [("explore_target", "c_2_2")]  # reached: the next, 2 steps
+    beliefs = k.on_percepts(beliefs, seen(13, (1, 2), [(0, 2), (2, 2)]))
+    assert targets(beliefs) == [("explore_target", "c_2_2")]  # on its way
+    person = Percepts(
+        agent="robot1",
+        epoch=14,
+        time=14.0,
+        position=(1, 2),
+        depth=1,
+        free=[(0, 2)],
+        blocked=[(2, 2)],
+        holding=[],
+        items=[],
+    )
+    beliefs = k.on_percepts(beliefs, person)
+    assert targets(beliefs) == [("explore_target", "c_2_1")]  # seen blocked: the next
     everything = [(x, y) for x in range(4) for y in range(3) if (x, y) not in ((1, 1), (3, 2))]
     beliefs = k.on_percepts(beliefs, seen(13, (2, 0), everything))
     assert targets(beliefs) == []  # all sensed: nothing to explore

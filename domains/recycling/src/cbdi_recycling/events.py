@@ -7,19 +7,23 @@ agent assumes free space: people and robots move, so an obstacle once seen is fo
 `OBSTACLE_MEMORY` seconds after it was last seen (a cell believed blocked for good would
 wall the robot in; one forgotten the moment it is out of sight makes a robot turn back
 and forth between a short way it cannot see is blocked and a detour), and only bins
-block for good. The agent's own cell,
-what it holds and its load (`loaded_amount`) come with every percept.
+block for good. Another robot seen moving on (`passing`) blocks nothing: the plan
+forecast past it would be repaired for nothing. The agent's own cell, what it holds and
+its load (`loaded_amount`) come with every percept.
 """
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
+
+import msgspec
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
 from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
 
 __all__ = [
     "OBSTACLE_MEMORY",
+    "PASSING",
     "UNKNOWN_DISTANCE",
     "Distances",
     "believe_others",
@@ -27,6 +31,7 @@ __all__ = [
     "distance",
     "exploration_target",
     "map_beliefs",
+    "passing",
     "revise_from_outcome",
     "revise_from_percepts",
     "seen_blocked",
@@ -109,6 +114,43 @@ def seen_others(
     for o in p.others:
         out[o.name] = (cell_name(o.cell), p.time)
     return out
+
+
+PASSING = 1.5  # simulated seconds: a robot seen elsewhere this lately is on its way
+
+
+def passing(memory: dict[str, tuple[str, float]], p: Percepts, keep: float = PASSING) -> Percepts:
+    """Return `p` with the cells of robots passing by sensed free: another robot seen in
+    another cell at its last sighting (`seen_others`, at most `keep` seconds ago) and no
+    nearer to this one than then is moving on (ahead on the same way), so the cell it
+    stands on is no obstacle to forecast a plan on. A robot standing still, seen for the
+    first time, or coming this way still blocks its cell.
+    """
+    here = p.position
+    gone = set()
+    for o in p.others:
+        last = memory.get(o.name)
+        if last is None or last[0] == cell_name(o.cell) or p.time - last[1] > keep:
+            continue
+        before = _cell_of(last[0])
+        if _steps(here, o.cell) >= _steps(here, before):
+            gone.add(tuple(o.cell))
+    if not gone:
+        return p
+    blocked = [c for c in p.blocked if tuple(c) not in gone]
+    free = [*p.free, *(c for c in p.blocked if tuple(c) in gone)]
+    return msgspec.structs.replace(p, blocked=blocked, free=free)
+
+
+def _cell_of(name: str) -> tuple[int, int]:
+    """The cell a `c_X_Y` object names (`cell_name`'s inverse)."""
+    _, x, y = name.split("_")
+    return int(x), int(y)
+
+
+def _steps(a: Sequence[int], b: Sequence[int]) -> int:
+    """Grid steps between two cells, walls aside."""
+    return abs(a[0] - b[0]) + abs(a[1] - b[1])
 
 
 def believe_others(beliefs: BeliefSet, others: dict[str, tuple[str, float]]) -> BeliefSet:

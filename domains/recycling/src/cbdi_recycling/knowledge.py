@@ -7,9 +7,9 @@ path length to it (`events.Distances`, each search kept).
 Exploration: the robot remembers every cell it has sensed. Once it has stood still for
 `EXPLORE_AFTER` seconds with nothing in hand, and from then until it picks something up,
 it believes `(explore_target CELL)`, the nearest cell it never sensed (kept until
-sensed), so the recycler's `explore` rule sends an idle robot to find litter nobody has
-seen yet. Waiting first keeps robots that are done for a moment (the others finishing,
-a short mission) out of the others' way.
+the robot stands on it), so the recycler's `explore` rule sends an idle robot to find
+litter nobody has seen yet. Waiting first keeps robots that are done for a moment (the
+others finishing, a short mission) out of the others' way.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from cbdi_recycling.events import (
     cell_name,
     exploration_target,
     map_beliefs,
+    passing,
     revise_from_outcome,
     revise_from_percepts,
     seen_blocked,
@@ -50,6 +51,7 @@ class RecyclingKnowledge:
         return map_beliefs(info)
 
     def on_percepts(self, beliefs: BeliefSet, percepts: Percepts) -> BeliefSet:
+        percepts = passing(self.others, percepts)
         self.blocked = seen_blocked(self.blocked, percepts)
         revised = revise_from_percepts(beliefs, percepts, blocked=self.blocked)
         self.others = seen_others(self.others, percepts)
@@ -65,11 +67,18 @@ class RecyclingKnowledge:
         return self._explore(revised, here)
 
     def _explore(self, beliefs: BeliefSet, here: str) -> BeliefSet:
-        """Believe `(explore_target CELL)`: the nearest cell never sensed, kept until it
-        is sensed (then the next nearest), or none once all were."""
+        """Believe `(explore_target CELL)`: the nearest cell never sensed when it was
+        chosen, kept until the robot stands on it or sees it blocked (then the next
+        nearest), or none once all were sensed. Going all the way, not just until the
+        cell is seen, makes one search take the robot two cells or more instead of one."""
         if not self.exploring:
             self.target = None
-        elif self.target is None or self.target in self.sensed:
+        elif (
+            self.target is None
+            or self.target == here
+            or self.target in self.blocked
+            or (self.target in self.sensed and self._all_sensed(beliefs))
+        ):
             bins = {f[2] for f in beliefs.facts_of("bin_pose")}
             self.target = exploration_target(
                 self.distances.lengths(beliefs, here), self.sensed, bins
@@ -79,6 +88,12 @@ class RecyclingKnowledge:
         if want == have:
             return beliefs
         return beliefs.removing(fact(*f) for f in have - want).adding(fact(*f) for f in want - have)
+
+    def _all_sensed(self, beliefs: BeliefSet) -> bool:
+        """Whether every cell a robot may stand on was sensed (nothing left to explore)."""
+        bins = {f[2] for f in beliefs.facts_of("bin_pose")}
+        cells = {n for n, t in beliefs.instances.items() if t == "cell"}
+        return not cells - bins - self.sensed
 
     def on_outcome(self, beliefs: BeliefSet, outcome: ActionOutcome) -> BeliefSet:
         return revise_from_outcome(beliefs, outcome)
