@@ -2,9 +2,9 @@
 
 16 robots on campus-30x30 repaired their plans 754 times in one run, and 674 of those
 forecast failures were another robot one cell away that then moved on. A robot seen
-moving on (in another cell than at its last sighting, a moment ago, further away than then)
-is sensed as leaving its cell free; one standing still, seen for the first time, seen
-long ago or coming this way still blocks it.
+moving on (in another cell than at its last sighting, a moment ago, and not heading
+into this robot's cell) is sensed as leaving its cell free; one standing still, seen for
+the first time, seen long ago or heading this way still blocks it.
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ def test_a_robot_moving_on_leaves_its_cell_free() -> None:
     p = after(seen(1.0, (5, 6)), seen(2.0, (5, 7)))  # one cell further away
     assert (5, 7) in p.free and (5, 7) not in p.blocked
     assert (9, 9) in p.blocked  # what no passing robot stands on stays blocked
+    p = after(seen(1.0, (4, 6)), seen(2.0, (5, 6)))  # crossing in front: next is (6, 6)
+    assert (5, 6) in p.free
 
 
 def test_a_robot_standing_coming_or_long_unseen_still_blocks() -> None:

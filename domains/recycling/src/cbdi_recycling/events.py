@@ -14,7 +14,7 @@ its load (`loaded_amount`) come with every percept.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Collection
 
 import msgspec
 
@@ -121,19 +121,21 @@ PASSING = 1.5  # simulated seconds: a robot seen elsewhere this lately is on its
 
 def passing(memory: dict[str, tuple[str, float]], p: Percepts, keep: float = PASSING) -> Percepts:
     """Return `p` with the cells of robots passing by sensed free: another robot seen in
-    another cell at its last sighting (`seen_others`, at most `keep` seconds ago) and no
-    nearer to this one than then is moving on (ahead on the same way), so the cell it
-    stands on is no obstacle to forecast a plan on. A robot standing still, seen for the
-    first time, or coming this way still blocks its cell.
+    another cell at its last sighting (`seen_others`, at most `keep` seconds ago) whose
+    next cell on the same heading is not this robot's is moving on (ahead, away or
+    across), so the cell it stands on is no obstacle to forecast a plan on. A robot
+    standing still, seen for the first time, or heading into this robot's cell still
+    blocks its cell.
     """
-    here = p.position
+    here = tuple(p.position)
     gone = set()
     for o in p.others:
         last = memory.get(o.name)
         if last is None or last[0] == cell_name(o.cell) or p.time - last[1] > keep:
             continue
         before = _cell_of(last[0])
-        if _steps(here, o.cell) >= _steps(here, before):
+        ahead = (2 * o.cell[0] - before[0], 2 * o.cell[1] - before[1])
+        if ahead != here:
             gone.add(tuple(o.cell))
     if not gone:
         return p
@@ -146,11 +148,6 @@ def _cell_of(name: str) -> tuple[int, int]:
     """The cell a `c_X_Y` object names (`cell_name`'s inverse)."""
     _, x, y = name.split("_")
     return int(x), int(y)
-
-
-def _steps(a: Sequence[int], b: Sequence[int]) -> int:
-    """Grid steps between two cells, walls aside."""
-    return abs(a[0] - b[0]) + abs(a[1] - b[1])
 
 
 def believe_others(beliefs: BeliefSet, others: dict[str, tuple[str, float]]) -> BeliefSet:
