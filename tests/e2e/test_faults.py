@@ -129,8 +129,9 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
 ) -> None:
     log, record = tmp_path / "up.log", tmp_path / "run.mcap"
     # The planner freezes itself (SIGSTOP) at epoch 8, the robot acting by then. The world
-    # waits for its ack up to the (shortened) ack timeout; the planner is killed at the
-    # 10 s kill limit and its restart joins the next epoch.
+    # waits for its ack up to the (shortened) ack timeout; in lockstep the planner is
+    # killed at that same limit (30 s: a member starved on a loaded machine is not killed
+    # sooner) and its restart joins the next epoch.
     up = _up(
         log,
         "--record",
@@ -153,9 +154,9 @@ def test_a_frozen_planner_is_reported_killed_restarted_and_the_run_completes(
     found = re.search(report, text)
     assert found, text[-3000:]
     print(f"frozen planner reported after {found.group(1)} s of silence")
-    # Reported at the 2 s limit, before the 10 s kill (how long after is the machine's).
-    assert float(found.group(1).rstrip("s")) < 10.0, text
-    killed = rf"pid={planner} silent_for=\S+ limit=10 action=kill"
+    # Reported at the 2 s limit, before the 30 s kill (how long after is the machine's).
+    assert float(found.group(1).rstrip("s")) < 30.0, text
+    killed = rf"pid={planner} silent_for=\S+ limit=30 action=kill"
     assert re.search(killed, text), text[-3000:]
     assert "restarting service=robot1/planner exit_code=-9 restart=1" in text
     assert up.returncode == 0, text[-3000:]

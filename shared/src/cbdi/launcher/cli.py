@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
 from dataclasses import replace
@@ -138,10 +139,12 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument(
         "--freeze-kill",
         type=float,
-        default=10.0,
+        default=None,
         metavar="SECONDS",
         help="a frozen service still silent this long is killed and restarted by policy "
-        "(default 10; at least --freeze-limit)",
+        "(default 10 in real time; in lockstep the members' ack timeout, CBDI_ACK_TIMEOUT "
+        "or 120: the world waits that long for a silent member anyway, and a kill before "
+        "would make the run depend on the machine's load; at least --freeze-limit)",
     )
     p.add_argument(
         "--agent-nice",
@@ -274,6 +277,31 @@ def _check_liveness(heartbeat: float, limit: float) -> None:
         )
 
 
+FREEZE_KILL = 10.0  # wall s: a frozen service silent this long is killed (real time)
+ACK_TIMEOUT = 120.0  # wall s: the lockstep members' default (`ack_timeout`)
+
+
+def _freeze_kill(given: float | None, lockstep: bool) -> float:
+    """The kill limit: `given`, else 10 s in real time and, in lockstep, the members' ack
+    timeout (what the services read from `CBDI_ACK_TIMEOUT`, 120 s by default).
+
+    In lockstep a silent member holds its epoch until the ack timeout whatever the
+    watchdog does: killed sooner, a member only starved on a loaded machine restarts and
+    the run depends on the load (16 robots with 100 other processes on 2 cores: 20
+    services killed and restarted, a run unlike the same run on a quiet machine).
+    """
+    if given is not None:
+        return given
+    if not lockstep:
+        return FREEZE_KILL
+    raw = os.environ.get("CBDI_ACK_TIMEOUT", "")
+    try:
+        ack = float(raw) if raw.strip() else ACK_TIMEOUT
+    except ValueError:
+        raise ConfigError("CBDI_ACK_TIMEOUT", raw, "must be a number of seconds") from None
+    return ack if math.isfinite(ack) and ack > 0 else ACK_TIMEOUT
+
+
 def _say_factory(quiet: bool) -> object:
     def say(service: str, line: str) -> None:
         if quiet and service != "launcher":
@@ -299,9 +327,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         _check_liveness(args.heartbeat, args.freeze_limit)
         if not 0 <= args.agent_nice <= 19:
             raise ConfigError("--agent-nice", str(args.agent_nice), "must be 0 to 19")
-        if not (math.isfinite(args.freeze_kill) and args.freeze_kill >= args.freeze_limit):
+        freeze_kill = _freeze_kill(args.freeze_kill, scenario.run.lockstep)
+        if not (math.isfinite(freeze_kill) and freeze_kill >= args.freeze_limit):
             raise ConfigError(
-                "--freeze-kill", str(args.freeze_kill), "must be finite and >= --freeze-limit"
+                "--freeze-kill", str(freeze_kill), "must be finite and >= --freeze-limit"
             )
         check_services(scenario)  # last: it builds every service (the slowest check)
     except ConfigError as exc:
@@ -318,7 +347,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         record=args.record,
         heartbeat=args.heartbeat,
         freeze_limit=args.freeze_limit,
-        freeze_kill=args.freeze_kill,
+        freeze_kill=freeze_kill,
         agent_process=args.agent_process,
         agent_nice=args.agent_nice,
         secure=args.secure,

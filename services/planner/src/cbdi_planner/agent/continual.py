@@ -4,10 +4,8 @@
 into messages to publish, and owns the search in progress (`search`), whose rounds the
 service runs in a worker thread (`round()`, then `after_round()` on the loop).
 
-A *line* is one plan as the executor sees it (one plan id): its partial plans continue
-it (baseline: the plan id). A repair, a revised goal or an improvement starts a new line
-from the committed state (baseline and `applies_after`: the last committed step), which
-the scheduler swaps in with an early arrest.
+Lines (one plan id each) and searches are `cbdi_planner.agent.lines`'; a repair, a
+revised goal or an improvement starts a new line from the committed state.
 """
 
 from __future__ import annotations
@@ -15,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from itertools import count
 
 from msgspec.structs import replace
@@ -27,6 +24,15 @@ from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
+from cbdi_planner.agent.lines import (
+    Line,
+    Search,
+    extend,
+    failure_status,
+    plan_prefix,
+    round_report,
+    search_status,
+)
 from cbdi_planner.agent.problem import (
     GoalError,
     beliefs_from_problem,
@@ -34,7 +40,6 @@ from cbdi_planner.agent.problem import (
     goal_of,
     problem_from_beliefs,
 )
-from cbdi_planner.agent.steps import plan_steps
 from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import (
     FAILS_LATER,
@@ -58,54 +63,13 @@ from cbdi_planner.expansion import prepare
 from cbdi_planner.heuristic import RelaxedPlanGraph
 from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain
-from cbdi_planner.plan import Plan, ScheduledAction
+from cbdi_planner.plan import Plan
 from cbdi_planner.state import State, initial_state
 from cbdi_planner.task import Task
 
-__all__ = ["ContinualPlanner", "Line", "Search"]
+__all__ = ["ContinualPlanner"]
 
 Log = Callable[..., None]
-
-
-@dataclass
-class Line:
-    """One plan id's published steps (absolute simulated times) and their statuses."""
-
-    plan_id: str
-    purpose: str
-    origin: float
-    baseline: str = ""
-    applies_after: str = ""
-    steps: list[ScheduledAction] = field(default_factory=list)
-    step_ids: list[str] = field(default_factory=list)
-    statuses: dict[int, str] = field(default_factory=dict)
-    complete: bool = False
-    improved: bool = False
-
-    def makespan_after(self, first: int) -> float:
-        """Return the scheduled span of the steps from index `first` on."""
-        rest = self.steps[first:]
-        if not rest:
-            return 0.0
-        return max(a.time + (a.duration or 0.0) for a in rest) - rest[0].time
-
-
-@dataclass
-class Search:
-    """A search thread and the line it fills (or, improving, may replace)."""
-
-    thread: SearchThread | Improver
-    line: Line
-    purpose: str
-    request_id: str
-    repairs: Line | None = None  # the executing line this search continues from
-    blocked: bool | None = None  # a failed search: blocked by something that moves?
-
-
-def plan_prefix(agent: str, life: int) -> str:
-    """How the plan ids of `agent`'s planner begin: `robot1-plan-` (then 1, 2, ...), and
-    after its first restart `robot1-plan-r1-`, and so on."""
-    return f"{agent}-plan-" if life == 0 else f"{agent}-plan-r{life}-"
 
 
 class ContinualPlanner:
@@ -563,63 +527,24 @@ class ContinualPlanner:
         """A failed search, `blocked` if the goal is reachable once moving things move."""
         if blocked is None:
             blocked = self._blocked(goal)
-        if blocked:
-            reason += " (blocked by something that moves: waiting for it)"
-        return SearchStatus(
-            agent=self.agent, request_id=request_id, status="failed", reason=reason, blocked=blocked
-        )
+        return failure_status(self.agent, request_id, reason, blocked)
 
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line
-        first = len(line.steps)
-        if (search.purpose != "new" or search.repairs is not None) and first == 0:
+        if (search.purpose != "new" or search.repairs is not None) and not line.steps:
             self.line = line  # the new line takes over from the committed point
             self.last_forecast = ("", "", "")
             self.repair_trigger = ""
         elif self.line is None:
             self.line = line
-        steps = plan_steps(self.domain, plan, line.origin, line.plan_id)
-        out_steps = []
-        for k, (scheduled, step) in enumerate(zip(plan.actions, steps, strict=True)):
-            start = self.on_grid(line.origin + scheduled.time)
-            step_id = f"{line.plan_id}-{first + k + 1}"
-            out_steps.append(replace(step, step_id=step_id, start=start))
-            line.steps.append(
-                ScheduledAction(line.origin + scheduled.time, scheduled.name, scheduled.duration)
-            )
-            line.step_ids.append(step_id)
-        line.complete = complete
         self.published.add(line.plan_id)
-        baseline = line.baseline if first == 0 else line.plan_id
-        return PartialPlan(
-            agent=self.agent,
-            plan_id=line.plan_id,
-            baseline=baseline,
-            steps=out_steps,
-            complete=complete,
-            applies_after=line.applies_after if first == 0 else "",
-            request_id=search.request_id,
-            purpose=search.purpose,
-        )
+        return extend(self.agent, self.domain, search, plan, complete, self.on_grid)
 
     def _round(self, search: Search, r: RoundDone) -> SearchRound:
-        return SearchRound(
-            agent=self.agent,
-            request_id=search.request_id,
-            plan_id=search.line.plan_id,
-            purpose=search.purpose,
-            number=r.number,
-            kind=r.kind,
-            mode=r.mode,
-            expanded=r.expanded,
-            seconds=r.seconds,
-            best_h=r.best_h if r.best_h < 10**9 else -1,
-            plan_actions=r.plan_actions,
-            time=self.now,
-        )
+        return round_report(self.agent, search, r, self.now)
 
     def _status(self, request_id: str, status: str, reason: str = "") -> SearchStatus:
-        return SearchStatus(agent=self.agent, request_id=request_id, status=status, reason=reason)
+        return search_status(self.agent, request_id, status, reason)
 
     def _plan_id(self) -> str:
         return f"{self.plan_prefix}{next(self.ids)}"

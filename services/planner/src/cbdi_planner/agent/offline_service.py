@@ -30,9 +30,9 @@ from cbdi.wire.agent import ActionStatus, BeliefsUpdate, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi_planner.agent.backends import COUNTING_BACKENDS, Counted, plan_counted, plan_with
-from cbdi_planner.agent.continual import plan_prefix
 from cbdi_planner.agent.epochs import NO_COUNTING, Epochs, checked, waits
 from cbdi_planner.agent.errors import BadRequestError
+from cbdi_planner.agent.lines import plan_prefix
 from cbdi_planner.agent.offline import Basis, Committed, Execution
 from cbdi_planner.agent.pacing import Pacer
 from cbdi_planner.agent.problem import (

@@ -11,9 +11,10 @@ from cbdi.runtime import ServiceContext
 from cbdi.wire.agent import ActionStatus, BeliefsUpdate, PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
-from cbdi_planner.agent.continual import ContinualPlanner, Search
+from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.epochs import Epochs, checked, waits
 from cbdi_planner.agent.errors import BadRequestError
+from cbdi_planner.agent.lines import Search
 from cbdi_planner.continual import Event, RoundDone
 
 __all__ = ["OnlinePlannerService"]

@@ -1,0 +1,141 @@
+"""The online planner's lines and searches, and the messages they turn into (pure).
+
+A *line* is one plan as the executor sees it (one plan id): its partial plans continue
+it (baseline: the plan id). A repair, a revised goal or an improvement starts a new line
+from the committed state (baseline and `applies_after`: the last committed step), which
+the scheduler swaps in with an early arrest. A *search* is a search thread and the line
+it fills (`ContinualPlanner` in `cbdi_planner.agent.continual` keeps both).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from msgspec.structs import replace
+
+from cbdi.wire.agent import PartialPlan
+from cbdi.wire.planner import SearchRound, SearchStatus
+from cbdi_planner.agent.steps import plan_steps
+from cbdi_planner.continual import RoundDone, SearchThread
+from cbdi_planner.continual.improver import Improver
+from cbdi_planner.pddl.ast import Domain
+from cbdi_planner.plan import Plan, ScheduledAction
+
+__all__ = [
+    "Line",
+    "Search",
+    "extend",
+    "failure_status",
+    "plan_prefix",
+    "round_report",
+    "search_status",
+]
+
+
+@dataclass
+class Line:
+    """One plan id's published steps (absolute simulated times) and their statuses."""
+
+    plan_id: str
+    purpose: str
+    origin: float
+    baseline: str = ""
+    applies_after: str = ""
+    steps: list[ScheduledAction] = field(default_factory=list)
+    step_ids: list[str] = field(default_factory=list)
+    statuses: dict[int, str] = field(default_factory=dict)
+    complete: bool = False
+    improved: bool = False
+
+    def makespan_after(self, first: int) -> float:
+        """Return the scheduled span of the steps from index `first` on."""
+        rest = self.steps[first:]
+        if not rest:
+            return 0.0
+        return max(a.time + (a.duration or 0.0) for a in rest) - rest[0].time
+
+
+@dataclass
+class Search:
+    """A search thread and the line it fills (or, improving, may replace)."""
+
+    thread: SearchThread | Improver
+    line: Line
+    purpose: str
+    request_id: str
+    repairs: Line | None = None  # the executing line this search continues from
+    blocked: bool | None = None  # a failed search: blocked by something that moves?
+
+
+def plan_prefix(agent: str, life: int) -> str:
+    """How the plan ids of `agent`'s planner begin: `robot1-plan-` (then 1, 2, ...), and
+    after its first restart `robot1-plan-r1-`, and so on."""
+    return f"{agent}-plan-" if life == 0 else f"{agent}-plan-r{life}-"
+
+
+def extend(
+    agent: str,
+    domain: Domain,
+    search: Search,
+    plan: Plan,
+    complete: bool,
+    on_grid: Callable[[float], float],
+) -> PartialPlan:
+    """Append `plan` (times from the line's origin) to `search`'s line; return the
+    partial plan that tells the executor (step starts on the epoch grid, `on_grid`)."""
+    line = search.line
+    first = len(line.steps)
+    steps = plan_steps(domain, plan, line.origin, line.plan_id)
+    out_steps = []
+    for k, (scheduled, step) in enumerate(zip(plan.actions, steps, strict=True)):
+        start = on_grid(line.origin + scheduled.time)
+        step_id = f"{line.plan_id}-{first + k + 1}"
+        out_steps.append(replace(step, step_id=step_id, start=start))
+        line.steps.append(
+            ScheduledAction(line.origin + scheduled.time, scheduled.name, scheduled.duration)
+        )
+        line.step_ids.append(step_id)
+    line.complete = complete
+    return PartialPlan(
+        agent=agent,
+        plan_id=line.plan_id,
+        baseline=line.baseline if first == 0 else line.plan_id,
+        steps=out_steps,
+        complete=complete,
+        applies_after=line.applies_after if first == 0 else "",
+        request_id=search.request_id,
+        purpose=search.purpose,
+    )
+
+
+def round_report(agent: str, search: Search, r: RoundDone, now: float) -> SearchRound:
+    """A round of `search`, as the planner reports it."""
+    return SearchRound(
+        agent=agent,
+        request_id=search.request_id,
+        plan_id=search.line.plan_id,
+        purpose=search.purpose,
+        number=r.number,
+        kind=r.kind,
+        mode=r.mode,
+        expanded=r.expanded,
+        seconds=r.seconds,
+        best_h=r.best_h if r.best_h < 10**9 else -1,
+        plan_actions=r.plan_actions,
+        time=now,
+    )
+
+
+def search_status(agent: str, request_id: str, status: str, reason: str = "") -> SearchStatus:
+    """A search request's status."""
+    return SearchStatus(agent=agent, request_id=request_id, status=status, reason=reason)
+
+
+def failure_status(agent: str, request_id: str, reason: str, blocked: bool) -> SearchStatus:
+    """A failed search, `blocked` if the goal is reachable once moving things move."""
+    if blocked:
+        reason += " (blocked by something that moves: waiting for it)"
+    return SearchStatus(
+        agent=agent, request_id=request_id, status="failed", reason=reason, blocked=blocked
+    )
