@@ -138,10 +138,10 @@ def test_a_robot_holding_an_item_owns_it_whatever_else_was_claimed() -> None:
     a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=0, cost=1.0))
     assert a.claim([("recycled", "p1")], 30, lambda item: 9.0) != []
     assert a.owner("p1") == "robot1"
-    again = a.claim([("recycled", "p1")], 31, lambda item: 9.0, holding={"p1"})
+    again = a.claim([("recycled", "p1")], 31, lambda item: 9.0, in_hand={"p1"})
     assert [(c.item, c.cost, c.epoch) for c in again] == [("p1", -1.0, 30)]
     assert a.owner("p1") == "robot2"
-    assert a.claim([("recycled", "p1")], 32, lambda item: 9.0, holding={"p1"}) == []
+    assert a.claim([("recycled", "p1")], 32, lambda item: 9.0, in_hand={"p1"}) == []
 
 
 def test_a_robot_that_picked_up_an_item_another_owned_takes_it_into_its_goal() -> None:

@@ -9,7 +9,7 @@ both into beliefs with no knowledge of the domain at all; an agent file names it
 A domain that wants more (memory of what was seen, what a claim costs) subclasses it:
 
     class CourierKnowledge(LiteralKnowledge):
-        holding_predicate = "carrying"      # (carrying ?robot ?parcel): claims in hand win
+        in_hand_predicate = "carrying"      # (carrying ?robot ?parcel): claims in hand win
 
         def cost(self, beliefs, agent, item):
             return path_length(beliefs, agent, item)
@@ -49,7 +49,7 @@ def revise(beliefs: BeliefSet, sensed: Sensed) -> BeliefSet:
 class LiteralKnowledge:
     """One agent's knowledge of a domain whose world speaks in beliefs (`Sensed`)."""
 
-    holding_predicate = ""  # `(P ?agent ?object)`: the objects an agent holds ("" none)
+    in_hand_predicate = ""  # `(P ?agent ?object)`: the objects an agent holds ("" none)
 
     def __init__(self, agent: str) -> None:
         self.agent = agent
@@ -68,7 +68,7 @@ class LiteralKnowledge:
     def cost(self, beliefs: BeliefSet, agent: str, item: str) -> float:
         return 0.0  # every claim costs the same: the group's order decides
 
-    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
-        if not self.holding_predicate:
+    def in_hand(self, beliefs: BeliefSet, agent: str) -> set[str]:
+        if not self.in_hand_predicate:
             return set()
-        return {f[2] for f in beliefs.facts_of(self.holding_predicate) if f[1:2] == (agent,)}
+        return {f[2] for f in beliefs.facts_of(self.in_hand_predicate) if f[1:2] == (agent,)}

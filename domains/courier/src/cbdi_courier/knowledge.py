@@ -45,7 +45,7 @@ def drives(beliefs: BeliefSet, start: str, goal: str) -> float:
 class CourierKnowledge(LiteralKnowledge):
     """What one courier robot's scheduler knows of its domain."""
 
-    holding_predicate = "carrying"
+    in_hand_predicate = "carrying"
 
     def __init__(self, agent: str) -> None:
         super().__init__(agent)

@@ -86,5 +86,5 @@ class RecyclingKnowledge:
     def cost(self, beliefs: BeliefSet, agent: str, item: str) -> float:
         return self.distances(beliefs, agent, item)
 
-    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
+    def in_hand(self, beliefs: BeliefSet, agent: str) -> set[str]:
         return {f[2] for f in beliefs.facts_of("holding") if f[1] == agent}

@@ -111,7 +111,7 @@ class ExecutorService:
         self.beliefs_in = BeliefsReceiver()
         self.outcome_epoch = -1
         self.acked = -1
-        self.holding = False  # lockstep: an epoch's inputs are being taken in, dispatch after
+        self.taking_in = False  # lockstep: an epoch's inputs are being taken in, dispatch after
         self.ack_timeout = ack_timeout
         self.lockstep = Lockstep(
             self.input_keys(),
@@ -156,14 +156,14 @@ class ExecutorService:
             # Take in the whole epoch (outcomes, beliefs, plans, arrests) before anything
             # is dispatched: an outcome handled first would start the next step of a
             # plan the scheduler arrests in the same epoch.
-            self.holding = True
+            self.taking_in = True
             try:
                 for key, msg in released.messages:
                     if not isinstance(msg, (EpochAck, *PERCEPTS)):
                         with dropping(self.ctx, key, msg):
                             await self.handle(msg)
             finally:
-                self.holding = False
+                self.taking_in = False
             await self.step()
             self.acked = epoch
             await send_ack(self.ctx.bus, self.agent, "executor", epoch)
@@ -221,7 +221,7 @@ class ExecutorService:
 
     async def step(self) -> None:
         """Dispatch what is due now (again after a refusal frees the next step)."""
-        while self.current() and not self.holding:
+        while self.current() and not self.taking_in:
             effects = self.dispatcher.tick(self.clock.now(), self.beliefs)
             await self.send(effects)
             if not any(st.status == "refused" for st in effects.statuses):

@@ -46,7 +46,7 @@ class DomainKnowledge(Protocol):
         """What pursuing goal object `item` costs `agent` (lower wins a claim)."""
         ...
 
-    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
+    def in_hand(self, beliefs: BeliefSet, agent: str) -> set[str]:
         """The objects `agent` holds."""
         ...
 

@@ -112,7 +112,7 @@ class SchedulerService:
         ]
 
     async def load_map(self) -> None:
-        """Believe the world's map (cells, `near`, bins): the paper's `map_loaded`.
+        """Believe the world's map (its objects and facts): the paper's `map_loaded`.
 
         Waits for the world as long as it takes (saying so every `MAP_WAIT` s): an agent
         may start well before its world (another project, another machine), and one that

@@ -127,7 +127,7 @@ class AgentSeen(Message, frozen=True, tag="cbdi.world.AgentSeen/1"):
 
 # What the world had published on an agent's keys when it sent the agent's percepts (the
 # last of its epoch): the count of its outcomes key, cumulative (as `EpochAck.sent`). A
-# gate holding fewer waits for the rest: the bus may recover one key's samples later than
+# gate that has fewer waits for the rest: the bus may recover one key's samples later than
 # another's (after a router restart), so arrival order across keys proves nothing.
 WorldSent = Annotated[dict[Symbol, Count], msgspec.Meta(max_length=8)]
 
