@@ -10,6 +10,7 @@ import asyncio
 
 import pytest
 from cbdi_recycling.events import revise_from_percepts
+from cbdi_recycling.percepts import Percepts
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, to_wire
@@ -17,7 +18,10 @@ from cbdi.bus import BusConfig, LogSink, messages, open_bus, publish, request
 from cbdi.bus.base import Bus
 from cbdi.lockstep import announce_ready, send_ack
 from cbdi.wire.agent import ActionStatus, ArrestReport, Check, EarlyArrest, PartialPlan, PlanStep
-from cbdi.wire.world import Percepts, StatsRequest, WorldStats
+from cbdi.wire.world import (
+    StatsRequest,
+    WorldStats,
+)
 from tests_support import REPO, wait_for
 
 pytestmark = pytest.mark.e2e

@@ -86,7 +86,7 @@ def test_channels_name_agent_component_and_schema(recording: tuple[Path, dict, s
     assert percepts.message_encoding == "msgpack"
     assert percepts.metadata["agent"] == "robot1"
     assert percepts.metadata["component"] == "world"
-    assert percepts.metadata["schema"] == "cbdi.world.Percepts/1"
+    assert percepts.metadata["schema"] == "cbdi.recycling.Percepts/1"
     assert summary.schemas[percepts.schema_id].encoding == "jsonschema"
     seqs = [m.seq for m in read_messages(path, ["cbdi/world/clock"])]
     assert seqs == list(range(1, len(seqs) + 1))  # the sender's sequence, none missing

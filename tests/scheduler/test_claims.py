@@ -7,10 +7,13 @@ from pathlib import Path
 import msgspec
 import pytest
 from cbdi_recycling.events import UNKNOWN_DISTANCE, distance
+from cbdi_recycling.percepts import Percepts
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
-from cbdi.wire.world import ItemView, Percepts
+from cbdi.wire.world import (
+    ItemView,
+)
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.mind import Mind, Reaction

@@ -5,9 +5,14 @@ from __future__ import annotations
 
 from cbdi_recycling.events import exploration_target, map_beliefs
 from cbdi_recycling.knowledge import EXPLORE_AFTER, RecyclingKnowledge
+from cbdi_recycling.percepts import Percepts
 
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.world import BinView, ItemView, Percepts, WorldInfo
+from cbdi.wire.world import (
+    BinView,
+    ItemView,
+    WorldInfo,
+)
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
 from tests_support import REPO

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import pytest
 from cbdi_recycling.events import revise_from_percepts
+from cbdi_recycling.percepts import Percepts
 from msgspec.structs import replace
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ItemView, Percepts
+from cbdi.wire.world import (
+    ItemView,
+)
 from cbdi_scheduler.conditions import Literal, bindings, holds
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect, fire_rules

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+from cbdi_recycling.percepts import Percepts
 
 from cbdi import keys, lockstep
 from cbdi.bus import LogSink, MemoryNetwork, messages
@@ -13,7 +14,12 @@ from cbdi.bus.typed import Stamped, serve
 from cbdi.lockstep import WORLD, EpochGate, Lockstep, Need, resend_latest_ack, send_ack
 from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.base import Message
-from cbdi.wire.world import EpochAck, Percepts, Tick, WorldInfo, WorldInfoRequest
+from cbdi.wire.world import (
+    EpochAck,
+    Tick,
+    WorldInfo,
+    WorldInfoRequest,
+)
 
 BELIEFS = "cbdi/r1/scheduler/beliefs"
 PLANS = "cbdi/r1/scheduler/plans"

@@ -18,7 +18,12 @@ A domain that wants more (memory of what was seen, what a claim costs) subclasse
 from __future__ import annotations
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ActionOutcome, Percepts, Sensed, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    Percept,
+    Sensed,
+    WorldInfo,
+)
 
 __all__ = ["LiteralKnowledge", "map_beliefs", "revise"]
 
@@ -57,7 +62,7 @@ class LiteralKnowledge:
     def map_beliefs(self, info: WorldInfo) -> list[Belief]:
         return map_beliefs(info)
 
-    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts | Sensed) -> BeliefSet:
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percept) -> BeliefSet:
         if isinstance(percepts, Sensed):
             return revise(beliefs, percepts)
         return beliefs  # the grid world's percepts: its domain's knowledge reads them

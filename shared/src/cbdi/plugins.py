@@ -7,11 +7,20 @@ that is not installed is a `ConfigError` saying which are.
 
 from __future__ import annotations
 
+from functools import cache
 from importlib.metadata import entry_points
 
 from cbdi.errors import ConfigError
+from cbdi.wire.world import Percept, Sensed
 
-__all__ = ["COUNTERS", "domain_counters", "installed", "load_plugin"]
+__all__ = [
+    "COUNTERS",
+    "PERCEPTS",
+    "domain_counters",
+    "installed",
+    "load_plugin",
+    "percept_types",
+]
 
 
 def installed(group: str) -> list[str]:
@@ -53,3 +62,22 @@ def domain_counters(simulator: str) -> dict[str, str]:
             "world info", "simulator", f"counters of {simulator!r}: not a mapping of names"
         )
     return dict(found)
+
+
+# A domain's own percept messages (a `cbdi.wire.world.Percept` subclass each, e.g. the
+# grid's `cbdi_recycling.percepts:Percepts`), beside the generic `Sensed`.
+PERCEPTS = "cbdi.percepts"
+
+
+@cache
+def percept_types() -> tuple[type[Percept], ...]:
+    """Return every percept message a world may publish: `Sensed`, then the installed
+    domains' own (entry-point group `cbdi.percepts`), by name; a ConfigError for one
+    that does not load or is no `Percept`."""
+    found: list[type[Percept]] = [Sensed]
+    for name in installed(PERCEPTS):
+        cls = load_plugin(PERCEPTS, name, "installed domains", name, "percept type")
+        if not (isinstance(cls, type) and issubclass(cls, Percept)):
+            raise ConfigError("installed domains", name, "percept type: not a Percept message")
+        found.append(cls)
+    return tuple(found)

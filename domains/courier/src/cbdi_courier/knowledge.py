@@ -14,7 +14,10 @@ from collections import deque
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.literals import LiteralKnowledge
-from cbdi.wire.world import Percepts, Sensed
+from cbdi.wire.world import (
+    Percept,
+    Sensed,
+)
 
 __all__ = ["FORGET_AFTER", "CourierKnowledge", "drives"]
 
@@ -51,7 +54,7 @@ class CourierKnowledge(LiteralKnowledge):
         super().__init__(agent)
         self.taken: dict[str, float] = {}  # cell -> when last seen taken
 
-    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts | Sensed) -> BeliefSet:
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percept) -> BeliefSet:
         revised = super().on_percepts(beliefs, percepts)
         if not isinstance(percepts, Sensed):
             return revised

@@ -16,7 +16,12 @@ from __future__ import annotations
 from collections.abc import Collection
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    Cell,
+    WorldInfo,
+)
+from cbdi_recycling.percepts import Percepts
 
 __all__ = [
     "OBSTACLE_MEMORY",

@@ -15,7 +15,10 @@ a short mission) out of the others' way.
 from __future__ import annotations
 
 from cbdi.beliefs import Belief, BeliefSet, fact
-from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    WorldInfo,
+)
 from cbdi_recycling.events import (
     Distances,
     believe_others,
@@ -27,6 +30,7 @@ from cbdi_recycling.events import (
     seen_blocked,
     seen_others,
 )
+from cbdi_recycling.percepts import Percepts
 
 __all__ = ["EXPLORE_AFTER", "RecyclingKnowledge"]
 

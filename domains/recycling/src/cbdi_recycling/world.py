@@ -18,14 +18,12 @@ from cbdi.wire.world import (
     ActionOutcome,
     ActionReply,
     ActionRequest,
-    AgentSeen,
     AgentStats,
     AgentView,
     BinView,
     Cell,
     ItemView,
     OutcomeStatus,
-    Percepts,
     PersonView,
     WorldInfo,
     WorldSnapshot,
@@ -34,6 +32,7 @@ from cbdi.wire.world import (
 from cbdi_recycling.chance import Chance, countdown, epochs_of, fails, start_index, stream
 from cbdi_recycling.errors import GridError, UnknownAgentError
 from cbdi_recycling.maps import WorldMap
+from cbdi_recycling.percepts import AgentSeen, Percepts
 from cbdi_recycling.physics import Physics
 from cbdi_recycling.rules import Action, check_request, complete, fail
 

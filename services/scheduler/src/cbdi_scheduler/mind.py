@@ -13,7 +13,10 @@ from dataclasses import dataclass, field, replace
 
 from cbdi.beliefs import FUNCTION, Belief, BeliefSet, fact
 from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
-from cbdi.wire.world import ActionOutcome, Percepts, Sensed
+from cbdi.wire.world import (
+    ActionOutcome,
+    Percept,
+)
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, Drop, achieved, drops, joint, select_desire
@@ -74,7 +77,7 @@ class Mind:
             goal=[list(g.atom) for g in desire.goal],
         )
 
-    def on_percepts(self, p: Percepts | Sensed) -> Reaction:
+    def on_percepts(self, p: Percept) -> Reaction:
         """Run one BDI cycle on this epoch's percepts."""
         self.now, self.epoch = p.time, p.epoch
         before = self.beliefs

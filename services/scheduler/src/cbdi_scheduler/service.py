@@ -21,6 +21,7 @@ from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.peers import Peers
+from cbdi.plugins import percept_types
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
@@ -37,7 +38,12 @@ from cbdi.wire.agent import (
 )
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
-from cbdi.wire.world import PERCEPTS, ActionOutcome, EpochAck, Percepts, Sensed, Tick
+from cbdi.wire.world import (
+    ActionOutcome,
+    EpochAck,
+    Percept,
+    Tick,
+)
 from cbdi_scheduler.asking import HeldAsks, ask_request, send_ask
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
@@ -47,8 +53,7 @@ from cbdi_scheduler.state import PlanLog, agent_state
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
 
 INPUTS: tuple[type[Message], ...] = (
-    Percepts,
-    Sensed,
+    *percept_types(),  # Sensed and the installed domains' own
     ActionOutcome,
     PartialPlan,
     SearchStatus,
@@ -152,10 +157,10 @@ class SchedulerService:
         """React to one input and publish what follows (beliefs first after percepts)."""
         if isinstance(msg, EpochAck | Tick):
             return
-        if isinstance(msg, PERCEPTS):
+        if isinstance(msg, Percept):
             self.held.release(msg.epoch)
         reaction = self.react(msg)
-        if isinstance(msg, PERCEPTS):  # beliefs first: the planner plans from them
+        if isinstance(msg, Percept):  # beliefs first: the planner plans from them
             update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
             await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
         await self.act(reaction)
@@ -292,7 +297,7 @@ class SchedulerService:
 
     def react(self, msg: Message) -> Reaction:
         mind = self.mind
-        if isinstance(msg, PERCEPTS):
+        if isinstance(msg, Percept):
             return mind.on_percepts(msg)
         if isinstance(msg, ActionOutcome):
             return mind.on_outcome(msg)

@@ -28,11 +28,9 @@ from cbdi.wire.fields import (
 )
 
 __all__ = [
-    "PERCEPTS",
     "ActionOutcome",
     "ActionReply",
     "ActionRequest",
-    "AgentSeen",
     "AgentStats",
     "AgentView",
     "BinView",
@@ -41,7 +39,7 @@ __all__ = [
     "EpochAck",
     "ItemView",
     "OutcomeStatus",
-    "Percepts",
+    "Percept",
     "PersonView",
     "Sensed",
     "StatsRequest",
@@ -118,13 +116,6 @@ class ItemView(Message, frozen=True, tag="cbdi.world.ItemView/1"):
     known: bool = True
 
 
-class AgentSeen(Message, frozen=True, tag="cbdi.world.AgentSeen/1"):
-    """Another agent standing on a cell of the sensed square."""
-
-    name: AgentName
-    cell: Cell
-
-
 # What the world had published on an agent's keys when it sent the agent's percepts (the
 # last of its epoch): the count of its outcomes key, cumulative (as `EpochAck.sent`). A
 # gate that has fewer waits for the rest: the bus may recover one key's samples later than
@@ -132,30 +123,20 @@ class AgentSeen(Message, frozen=True, tag="cbdi.world.AgentSeen/1"):
 WorldSent = Annotated[dict[Symbol, Count], msgspec.Meta(max_length=8)]
 
 
-class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
-    """What one agent senses this epoch in the (2d+1)x(2d+1) square around it.
-
-    `free` cells are inside the map and hold no wall, bin, person or agent; `blocked` are
-    the other in-map cells of the square (the agent's own cell is reported as blocked by
-    itself only in `position`). `items` lists the items lying in the square, `holding`
-    those the agent carries, `others` the other agents standing in it (which of the
-    `blocked` cells they hold). `sent`: see `WorldSent` (the world service fills it in).
-    """
+class Percept(Message, frozen=True):
+    """What one agent senses in one epoch: the base of every message a world publishes
+    on an agent's percepts key, `Sensed` or a domain's own (registered in entry-point
+    group `cbdi.percepts`, `cbdi.plugins.percept_types`). The lockstep gates and the
+    services read only these fields; a domain's knowledge reads the rest. `sent`: see
+    `WorldSent` (the world service fills it in)."""
 
     agent: AgentName
     epoch: Count
     time: NonNegative
-    position: Cell
-    depth: Annotated[int, msgspec.Meta(ge=0, le=1000)]
-    free: Many[Cell]
-    blocked: Many[Cell]
-    items: Many[ItemView]
-    holding: Many[Symbol]
     sent: WorldSent = {}
-    others: Many[AgentSeen] = []
 
 
-class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
+class Sensed(Percept, frozen=True, tag="cbdi.world.Sensed/1"):
     """What one agent senses this epoch, as belief changes: any simulator's percepts.
 
     `instances` are objects first seen (name -> PDDL type), `add` the ground atoms sensed
@@ -164,18 +145,10 @@ class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
     neither added nor deleted keeps what the agent believed. `sent`: see `WorldSent`.
     """
 
-    agent: AgentName
-    epoch: Count
-    time: NonNegative
     instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
     add: Many[Atom] = []
     delete: Many[Atom] = []
     fluents: Many[tuple[Atom, Finite]] = []
-    sent: WorldSent = {}
-
-
-# The percept messages a world publishes (a grid sensor's, any simulator's).
-PERCEPTS = (Percepts, Sensed)
 
 
 class AgentView(Message, frozen=True, tag="cbdi.world.AgentView/1"):

@@ -25,9 +25,9 @@ from cbdi.wire.world import (
     ActionReply,
     ActionRequest,
     EpochAck,
-    Percepts,
     WorldInfo,
 )
+from cbdi_recycling.percepts import Percepts
 from cbdi_recycling.scripted.policy import Beliefs, Step, greedy_step, parse_script
 
 __all__ = ["ScriptedSettings", "main"]
