@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import uvloop
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 from cbdi import keys
 from cbdi.agentfile import read_agent_file

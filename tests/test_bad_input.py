@@ -16,7 +16,7 @@ from collections.abc import AsyncIterator
 
 import msgpack
 import pytest
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 from test_online import CORRIDOR, beliefs
 
 from cbdi import keys

@@ -10,6 +10,7 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.wire import grid_map
 
 from cbdi import keys
 from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
@@ -83,7 +84,7 @@ async def test_scripted_agent_recycles_one_item(
         and stats.totals["litter_on_ground"] == 0
         and stats.done
     )
-    assert info.width == 6 and info.agents == ["robot1"]
+    assert grid_map(info).width == 6 and info.agents == ["robot1"]
     assert world.alive() and agent.alive()  # the world keeps serving after the run
 
 

@@ -10,7 +10,7 @@ import asyncio
 
 import pytest
 from cbdi_recycling.events import revise_from_percepts
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, to_wire

@@ -22,13 +22,7 @@ def recorded(messages: list[tuple[str, Message]]) -> list[RecordedMessage]:
 def info(simulator: str) -> WorldInfo:
     return WorldInfo(
         map_name="m",
-        width=1,
-        height=1,
-        walls=[],
-        bins=[],
         agents=["robot1"],
-        detection_depth={},
-        capacity=0,
         epoch_duration=1.0,
         durations={},
         simulator=simulator,

@@ -13,7 +13,7 @@ import pytest
 from cbdi_recycling.events import OBSTACLE_MEMORY, believe_others, seen_others
 from cbdi_recycling.knowledge import RecyclingKnowledge
 from cbdi_recycling.maps import load_map
-from cbdi_recycling.percepts import AgentSeen, Percepts
+from cbdi_recycling.wire import AgentSeen, Percepts
 from cbdi_recycling.world import AgentSpec, World
 
 import cbdi_scheduler.asking as asking

@@ -7,7 +7,7 @@ from pathlib import Path
 import msgspec
 import pytest
 from cbdi_recycling.events import UNKNOWN_DISTANCE, distance
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
@@ -170,22 +170,11 @@ def test_distances_on_the_30x30_campus_are_shortest_paths_and_fast() -> None:
     from cbdi_recycling.events import Distances, map_beliefs
     from cbdi_recycling.maps import load_map
 
-    from cbdi.wire.world import BinView, WorldInfo
+    from tests_support import grid_info
 
     root = Path(__file__).resolve().parents[2]
     m = load_map(root / "domains/recycling/maps/campus-30x30.toml")
-    info = WorldInfo(
-        map_name=m.name,
-        width=m.width,
-        height=m.height,
-        walls=sorted(m.walls),
-        bins=[BinView(name=n, cell=c) for n, c in m.bins.items()],
-        agents=["r"],
-        detection_depth={"r": 1},
-        capacity=3,
-        epoch_duration=1.0,
-        durations={},
-    )
+    info = grid_info(m.width, m.height, sorted(m.walls), dict(m.bins), ("r",), m.name)
     base = BeliefSet.of(map_beliefs(info))
     cells = sorted(n for n, t in base.instances.items() if t == "cell")
     start, far = cells[0], cells[-1]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from itertools import pairwise
 from pathlib import Path
 
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 from cbdi.beliefs import fact, instance
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep

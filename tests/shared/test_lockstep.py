@@ -6,7 +6,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 from cbdi import keys, lockstep
 from cbdi.bus import LogSink, MemoryNetwork, messages
@@ -288,8 +288,7 @@ async def test_a_world_not_up_yet_is_asked_again_not_taken_for_none(
     assert not await step.rejoin()
     assert step.lockstep_member is None
     info = WorldInfo(
-        map_name="m", width=1, height=1, walls=[], bins=[], agents=["r1"],
-        detection_depth={}, capacity=1, epoch_duration=1.0, durations={},
+        map_name="m", agents=["r1"], epoch_duration=1.0, durations={},
         members=[S], lockstep=True,
     )  # fmt: skip
 

@@ -7,7 +7,7 @@ import re
 
 import msgpack
 import pytest
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -160,12 +160,13 @@ PERCEPTS = {
 def test_schema_valid_nonsense_is_rejected_naming_the_field(
     cls: str, fields: dict[str, object], where: str
 ) -> None:
+    import cbdi_recycling.wire
+
     import cbdi.wire.agent
     import cbdi.wire.planner
     import cbdi.wire.world
-    import cbdi_recycling.percepts
 
-    modules = (cbdi.wire.agent, cbdi.wire.planner, cbdi.wire.world, cbdi_recycling.percepts)
+    modules = (cbdi.wire.agent, cbdi.wire.planner, cbdi.wire.world, cbdi_recycling.wire)
     message = next(getattr(m, cls) for m in modules if hasattr(m, cls))
     with pytest.raises(WireError, match=re.escape(where)):
         decode(_tagged(message, **fields), message)

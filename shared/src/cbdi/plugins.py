@@ -65,7 +65,7 @@ def domain_counters(simulator: str) -> dict[str, str]:
 
 
 # A domain's own percept messages (a `cbdi.wire.world.Percept` subclass each, e.g. the
-# grid's `cbdi_recycling.percepts:Percepts`), beside the generic `Sensed`.
+# grid's `cbdi_recycling.wire:Percepts`), beside the generic `Sensed`.
 PERCEPTS = "cbdi.percepts"
 
 

@@ -30,7 +30,7 @@ from cbdi_recycling.events import (
     seen_blocked,
     seen_others,
 )
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 __all__ = ["EXPLORE_AFTER", "RecyclingKnowledge"]
 

@@ -20,7 +20,6 @@ from cbdi.wire.world import (
     ActionRequest,
     AgentStats,
     AgentView,
-    BinView,
     Cell,
     ItemView,
     OutcomeStatus,
@@ -32,9 +31,9 @@ from cbdi.wire.world import (
 from cbdi_recycling.chance import Chance, countdown, epochs_of, fails, start_index, stream
 from cbdi_recycling.errors import GridError, UnknownAgentError
 from cbdi_recycling.maps import WorldMap
-from cbdi_recycling.percepts import AgentSeen, Percepts
 from cbdi_recycling.physics import Physics
 from cbdi_recycling.rules import Action, check_request, complete, fail
+from cbdi_recycling.wire import AgentSeen, BinView, GridMap, Percepts, with_map
 
 __all__ = ["AgentSpec", "EpochResult", "World"]
 
@@ -350,7 +349,7 @@ class World:
                 name=n,
                 cell=a.cell,
                 pose=pose(n),
-                holding=list(a.holding),
+                load=list(a.holding),
                 action=a.action.name if a.action else "",
             )
             for n, a in self.agents.items()
@@ -394,18 +393,21 @@ class World:
     def info(self) -> WorldInfo:
         """The static part of the world."""
         m = self.map
-        return WorldInfo(
-            map_name=m.name,
+        grid = GridMap(
             width=m.width,
             height=m.height,
             walls=sorted(m.walls),
             bins=[BinView(name=n, cell=c) for n, c in m.bins.items()],
-            agents=list(self.agents),
-            detection_depth={n: a.spec.detection_depth for n, a in self.agents.items()},
             capacity=m.capacity,
+            detection_depth={n: a.spec.detection_depth for n, a in self.agents.items()},
+        )
+        info = WorldInfo(
+            map_name=m.name,
+            agents=list(self.agents),
             epoch_duration=m.epoch_duration,
             durations=dict(m.durations),
             known_items=[
                 ItemView(name=n, cell=c, known=True) for n, (c, known) in m.litter.items() if known
             ],
         )
+        return with_map(info, grid)

@@ -133,11 +133,12 @@ class SchedulerService:
                 waited += MAP_WAIT
                 why = str(exc) or "the world did not answer"
                 self.ctx.log.warning("waiting_for_world", waited=waited, error=why)
-        self.mind.beliefs = self.mind.beliefs.adding(self.mind.knowledge.map_beliefs(info))
+        known = self.mind.knowledge.map_beliefs(info)
+        self.mind.beliefs = self.mind.beliefs.adding(known)
         self.members = list(info.members)
         me = keys.member(self.agent, "scheduler")
         self.lockstep.lockstep_member = info.lockstep and me in info.members
-        self.ctx.log.info("map_loaded", map=info.map_name, cells=info.width * info.height)
+        self.ctx.log.info("map_loaded", map=info.map_name, beliefs=len(known))
 
     async def run(self, stream: AsyncIterator[Stamped], load_map: bool) -> None:
         """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""

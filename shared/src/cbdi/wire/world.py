@@ -33,11 +33,12 @@ __all__ = [
     "ActionRequest",
     "AgentStats",
     "AgentView",
-    "BinView",
     "Cell",
     "ClockRequest",
     "EpochAck",
     "ItemView",
+    "MapLayer",
+    "MapView",
     "OutcomeStatus",
     "Percept",
     "PersonView",
@@ -152,12 +153,13 @@ class Sensed(Percept, frozen=True, tag="cbdi.world.Sensed/1"):
 
 
 class AgentView(Message, frozen=True, tag="cbdi.world.AgentView/1"):
-    """One robot in a snapshot: logical cell, continuous pose, load and current action."""
+    """One robot in a snapshot: logical cell, continuous pose, what it carries (`load`:
+    the items it has taken off the map) and its current action."""
 
     name: AgentName
     cell: Cell
     pose: Pose
-    holding: Many[Symbol]
+    load: Many[Symbol] = []
     action: Id = ""
 
 
@@ -167,13 +169,6 @@ class PersonView(Message, frozen=True, tag="cbdi.world.PersonView/1"):
     name: Symbol
     cell: Cell
     pose: Pose
-
-
-class BinView(Message, frozen=True, tag="cbdi.world.BinView/1"):
-    """One bin."""
-
-    name: Symbol
-    cell: Cell
 
 
 class WorldSnapshot(Message, frozen=True, tag="cbdi.world.WorldSnapshot/1"):
@@ -198,18 +193,48 @@ class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"
     """Ask for the static part of the world (map geometry)."""
 
 
-class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
-    """The static part of the world: size, walls, bins (fixed drop-off places), agents
-    and their sensing depth."""
+Colour = tuple[
+    Annotated[int, msgspec.Meta(ge=0, le=255)],
+    Annotated[int, msgspec.Meta(ge=0, le=255)],
+    Annotated[int, msgspec.Meta(ge=0, le=255)],
+]
 
-    map_name: Text
+
+class MapLayer(Message, frozen=True, tag="cbdi.world.MapLayer/1"):
+    """One static layer of a map as the views draw it: cells (walls, drop-off places,
+    chargers), each a box `size` cells wide in `colour` (rerun, at `world/map/<name>`)
+    and the character `glyph` (text), with a label per cell or none."""
+
+    name: Symbol
+    cells: Many[Cell]
+    labels: Many[Symbol] = []
+    glyph: Annotated[str, msgspec.Meta(pattern="^[!-~]$")] = "#"
+    colour: Colour = (60, 60, 60)
+    size: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 1.0
+
+
+class MapView(Message, frozen=True, tag="cbdi.world.MapView/1"):
+    """How the views draw a map that has a floor of cells: its size and static layers.
+    What the cells mean is the domain's (its knowledge reads `WorldInfo.map`)."""
+
     width: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
     height: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
-    walls: Many[Cell]
-    bins: Many[BinView]
+    layers: Annotated[list[MapLayer], msgspec.Meta(max_length=64)] = []
+
+
+# A domain's own map, encoded by its simulator: one message of the domain's own type (the
+# grid's `cbdi.recycling.GridMap/1`), which only the domain's code decodes.
+DomainMap = Annotated[bytes, msgspec.Meta(max_length=64 * 1024 * 1024)]
+
+
+class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
+    """The static part of the world, what every domain has: the agents, the epoch's
+    length, action durations, the static beliefs (`instances`, `facts`, `fluents`), how
+    views draw the map (`view`, if it has a floor of cells) and the domain's own map
+    (`map`, read only by the domain's code)."""
+
+    map_name: Text
     agents: Many[AgentName]
-    detection_depth: Annotated[dict[AgentName, Count], msgspec.Meta(max_length=10_000)]
-    capacity: Count
     epoch_duration: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
     durations: Annotated[dict[Symbol, NonNegative], msgspec.Meta(max_length=1000)]
     known_items: Many[ItemView] = []  # items agents know of at the start
@@ -217,13 +242,15 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     # waits for.
     members: Many[Symbol] = []
     lockstep: bool = False
-    actions: Many[Symbol] = []  # the PDDL actions the world performs (its binding's)
+    actions: Many[Symbol] = []  # the PDDL actions the world performs (its simulator's)
     # What the map tells every agent at the start (a simulator's static beliefs): objects
     # (name -> PDDL type), ground atoms and function values.
     instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
     facts: Many[Atom] = []
     fluents: Many[tuple[Atom, Finite]] = []
     simulator: Id = ""  # the simulator's name (entry point cbdi.simulators)
+    view: MapView | None = None
+    map: DomainMap = b""
 
 
 ACK_STAGES = ("ready", "beliefs", "done")
@@ -236,7 +263,7 @@ class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
     (the scheduler's first half: beliefs and commands out, the planner may start) or
     `ready` (epoch -1: alive, subscribed, waiting for epoch 0; the start barrier).
     `sent` is what the component had published by then, per key (cumulative counts, the
-    `seq` of its last message on that key): a receiver holding fewer of a key's messages
+    `seq` of its last message on that key): a receiver that has fewer of a key's messages
     waits for the rest, so nothing of epoch k arrives after the next epoch starts.
     """
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from cbdi.wire.world import (
     Cell,
 )
-from cbdi_recycling.percepts import Percepts
+from cbdi_recycling.wire import Percepts
 
 __all__ = ["Beliefs", "Step", "greedy_step", "next_hop", "parse_script"]
 
