@@ -72,7 +72,12 @@ async def test_scripted_agent_recycles_one_item(
     assert finished.reason == "done"
     assert finished.epoch == 12  # 6 moves of 1 + pickup 3 + recycle 3 epochs
     robot = stats.agents[0]
-    assert (robot.agent, robot.moves, robot.counts["pickups"], robot.counts["recycled"]) == (
+    assert (
+        robot.agent,
+        robot.counts["moves"],
+        robot.counts["pickups"],
+        robot.counts["recycled"],
+    ) == (
         "robot1",
         6,
         1,
@@ -126,7 +131,7 @@ async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -
         stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats, timeout=5)
     finally:
         await bus.close()
-    assert stats.agents[0].failed == 2 and stats.agents[0].moves == 0
+    assert stats.agents[0].failed == 2 and stats.agents[0].counts["moves"] == 0
 
 
 def test_broken_map_is_rejected_with_file_field_and_reason(tmp_path: Path, spawn: object) -> None:

@@ -191,7 +191,6 @@ class CourierSimulator:
         rows = [
             AgentStats(
                 agent=n,
-                moves=self.robots[n].counts.get("drive", 0),
                 failed=self.robots[n].counts.get("failed", 0),
                 rejected=self.robots[n].counts.get("rejected", 0),
                 busy=round(self.robots[n].busy, 9),

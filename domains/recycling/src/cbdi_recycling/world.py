@@ -39,8 +39,8 @@ __all__ = ["AgentSpec", "EpochResult", "World"]
 
 _EPS = 1e-9
 # The counters every world keeps (fields of AgentStats), and this world's own.
-_GENERIC_COUNTS = ("moves", "blocked", "failed", "rejected", "contacts")
-_OWN_COUNTS = ("pickups", "recycled")
+_GENERIC_COUNTS = ("failed", "rejected")
+_OWN_COUNTS = ("moves", "blocked", "contacts", "pickups", "recycled")  # the paper's metric first
 
 
 @dataclass(frozen=True)
@@ -383,8 +383,8 @@ class World:
         )
 
     def _agent_stats(self, name: str) -> AgentStats:
-        """One agent's row: the generic counters as fields, pickups and recycled in
-        `counts` (zero when nothing happened, as before they were fields)."""
+        """One agent's row: the generic counters as fields, the grid's own in `counts`
+        (zero when nothing happened)."""
         a = self.agents[name]
         generic = {k: v for k, v in a.stats.items() if k in _GENERIC_COUNTS}
         counts = {k: a.stats.get(k, 0) for k in _OWN_COUNTS}

@@ -171,9 +171,8 @@ def _count(report: Inspection, counters: dict[str, str]) -> None:
 
 
 def _stats_dict(a: Any) -> dict[str, int]:
-    """One agent's world counters: the generic ones, then the simulator's own."""
-    fields = ("moves", "blocked", "failed", "rejected", "contacts")
-    return {**{k: getattr(a, k) for k in fields}, **a.counts}
+    """One agent's world counters: the simulator's own, then the generic ones."""
+    return {**a.counts, "failed": a.failed, "rejected": a.rejected}
 
 
 def render(report: Inspection) -> str:

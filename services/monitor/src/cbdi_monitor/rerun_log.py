@@ -228,8 +228,8 @@ class RerunLogger:
     def on_stats(self, m: RecordedMessage) -> None:
         rr, stats = self.rr, decode(m.payload, WorldStats, m.key)
         for a in stats.agents:
-            counters = {"moves": a.moves, "failed": a.failed, "blocked": a.blocked, **a.counts}
-            for name, value in counters.items():  # the generic ones, then the simulator's
+            counters = {**a.counts, "failed": a.failed}
+            for name, value in counters.items():  # the simulator's own, then failures
                 self.log(f"plots/{a.agent}/{name}", rr.Scalars(value))
 
     def on_alive(self, m: RecordedMessage) -> None:

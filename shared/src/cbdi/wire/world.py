@@ -275,15 +275,13 @@ class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
 
 
 class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
-    """Counters for one agent, the paper's metric (moves) first; a simulator's own
-    counters (pickups, deliveries, charges, ...) in `counts`, by name."""
+    """Counters for one agent: actions that failed and requests refused, time busy, and
+    the simulator's own counters in `counts`, by name (the grid's moves, blocked moves,
+    contacts, pickups and recycled items; courier's count of each action)."""
 
     agent: AgentName
-    moves: Count = 0
-    blocked: Count = 0
     failed: Count = 0
     rejected: Count = 0
-    contacts: Count = 0
     busy: NonNegative = 0.0  # simulated seconds in actions that ended (the rest is idle)
     counts: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=256)] = {}
 
