@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import uvloop
+from cbdi_recycling.wire import Percepts
 
 from cbdi import keys
 from cbdi.agentfile import read_agent_file
@@ -44,7 +45,6 @@ from cbdi.clock import ManualClock
 from cbdi.runtime.together import Together, TogetherService
 from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.common import RunFinished
-from cbdi.wire.world import Percepts
 from cbdi_executor.service import ExecutorSettings, executor_main
 from cbdi_planner.agent import online_service as planner_service
 from cbdi_planner.agent.continual import ContinualPlanner

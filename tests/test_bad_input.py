@@ -16,6 +16,7 @@ from collections.abc import AsyncIterator
 
 import msgpack
 import pytest
+from cbdi_recycling.wire import Percepts
 from test_online import CORRIDOR, beliefs
 
 from cbdi import keys
@@ -38,7 +39,6 @@ from cbdi.wire.world import (
     ActionRequest,
     EpochAck,
     ItemView,
-    Percepts,
     StatsRequest,
     WorldStats,
 )
@@ -59,7 +59,7 @@ GARBAGE = [
     b"\xc1\xc1\xc1",
     b"not msgpack",
     msgpack.packb([1, 2, 3]),
-    msgpack.packb({"schema": "cbdi.world.Percepts/1", "agent": 5}),
+    msgpack.packb({"schema": "cbdi.recycling.Percepts/1", "agent": 5}),
     msgpack.packb({"schema": "cbdi.nothing.Such/1", "agent": "robot1"}),
 ]
 
@@ -301,7 +301,7 @@ def test_dropping_reports_a_domain_error_with_schema_sender_and_key_and_goes_on(
     assert isinstance(e1, RejectedInputError) and isinstance(e2, RejectedInputError)
     assert k1 == "cbdi/world/percepts/robot1" and e1.sender == "robot1"
     assert str(e1) == (
-        "rejected cbdi.world.Percepts/1 message from robot1 on cbdi/world/percepts/robot1:"
+        "rejected cbdi.recycling.Percepts/1 message from robot1 on cbdi/world/percepts/robot1:"
         " a belief needs a name"
     )
     assert isinstance(e3, KeyError)  # a bug is a crash, reported as such

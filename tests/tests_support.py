@@ -10,8 +10,10 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from cbdi.launcher.ports import free_port as _free_port
+from cbdi.wire.world import WorldInfo
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -103,3 +105,34 @@ def cpu_load(burners: int = 2) -> Iterator[None]:
         for p in procs:
             p.kill()
             p.wait()
+
+
+def grid_info(
+    width: int,
+    height: int,
+    walls: list[tuple[int, int]] | None = None,
+    bins: dict[str, tuple[int, int]] | None = None,
+    agents: tuple[str, ...] = ("robot1",),
+    map_name: str = "m",
+    **rest: Any,
+) -> WorldInfo:
+    """A recycling grid's `WorldInfo` (its `GridMap` in `map`, its drawing in `view`):
+    capacity 3, sensing depth 1, epochs of 1 s; `rest` are more `WorldInfo` fields."""
+    from cbdi_recycling.wire import BinView, GridMap, with_map
+
+    grid = GridMap(
+        width=width,
+        height=height,
+        walls=sorted(walls or []),
+        bins=[BinView(name=n, cell=c) for n, c in (bins or {}).items()],
+        capacity=3,
+        detection_depth=dict.fromkeys(agents, 1),
+    )
+    info = WorldInfo(
+        map_name=map_name,
+        agents=list(agents),
+        epoch_duration=1.0,
+        durations={},
+        **rest,
+    )
+    return with_map(info, grid)

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import pytest
-from cbdi_recycling.binding import ACTIONS, UnboundActionError, cell_of
+from cbdi_recycling.binding import ACTIONS, UnboundActionError, cell_of, load_binding
 
 from cbdi.errors import ConfigError
-from cbdi.plugins import installed, load_binding
+from cbdi.plugins import installed
 from cbdi.wire.world import ActionRequest
 
 

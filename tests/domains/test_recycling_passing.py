@@ -10,8 +10,7 @@ the first time, seen long ago or heading this way still blocks it.
 from __future__ import annotations
 
 from cbdi_recycling.events import PASSING, passing, seen_others
-
-from cbdi.wire.world import AgentSeen, Percepts
+from cbdi_recycling.wire import AgentSeen, Percepts
 
 
 def seen(time: float, other: tuple[int, int], at: tuple[int, int] = (5, 5)) -> Percepts:

@@ -243,12 +243,14 @@ def test_paper_situation_flags_reach_the_world_and_the_agent(tmp_path: Path) -> 
     )
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["stats"]["litter_recycled"] == 3  # the third one found
+    from cbdi_recycling.wire import Percepts, grid_map
+
     from cbdi.wire import decode
-    from cbdi.wire.world import Percepts, WorldInfo
+    from cbdi.wire.world import WorldInfo
     from cbdi_monitor.reader import read_messages
 
     info = next(decode(m.payload, WorldInfo) for m in read_messages(rec, ["cbdi/world/info"]))
-    assert info.detection_depth == {"robot1": 2}
+    assert grid_map(info).detection_depth == {"robot1": 2}
     first = next(
         decode(m.payload, Percepts) for m in read_messages(rec, ["cbdi/world/percepts/robot1"])
     )

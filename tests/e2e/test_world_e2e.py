@@ -10,6 +10,7 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from cbdi_recycling.wire import grid_map
 
 from cbdi import keys
 from cbdi.bus import BusConfig, LogSink, messages, open_bus, request
@@ -71,7 +72,12 @@ async def test_scripted_agent_recycles_one_item(
     assert finished.reason == "done"
     assert finished.epoch == 12  # 6 moves of 1 + pickup 3 + recycle 3 epochs
     robot = stats.agents[0]
-    assert (robot.agent, robot.moves, robot.counts["pickups"], robot.counts["recycled"]) == (
+    assert (
+        robot.agent,
+        robot.counts["moves"],
+        robot.counts["pickups"],
+        robot.counts["recycled"],
+    ) == (
         "robot1",
         6,
         1,
@@ -83,7 +89,7 @@ async def test_scripted_agent_recycles_one_item(
         and stats.totals["litter_on_ground"] == 0
         and stats.done
     )
-    assert info.width == 6 and info.agents == ["robot1"]
+    assert grid_map(info).width == 6 and info.agents == ["robot1"]
     assert world.alive() and agent.alive()  # the world keeps serving after the run
 
 
@@ -125,7 +131,7 @@ async def test_failed_move_is_reported_and_counted(router: str, spawn: object) -
         stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats, timeout=5)
     finally:
         await bus.close()
-    assert stats.agents[0].failed == 2 and stats.agents[0].moves == 0
+    assert stats.agents[0].failed == 2 and stats.agents[0].counts["moves"] == 0
 
 
 def test_broken_map_is_rejected_with_file_field_and_reason(tmp_path: Path, spawn: object) -> None:

@@ -10,6 +10,7 @@ import asyncio
 
 import pytest
 from cbdi_recycling.events import revise_from_percepts
+from cbdi_recycling.wire import Percepts
 
 from cbdi import keys
 from cbdi.beliefs import BeliefSet, to_wire
@@ -17,7 +18,10 @@ from cbdi.bus import BusConfig, LogSink, messages, open_bus, publish, request
 from cbdi.bus.base import Bus
 from cbdi.lockstep import announce_ready, send_ack
 from cbdi.wire.agent import ActionStatus, ArrestReport, Check, EarlyArrest, PartialPlan, PlanStep
-from cbdi.wire.world import Percepts, StatsRequest, WorldStats
+from cbdi.wire.world import (
+    StatsRequest,
+    WorldStats,
+)
 from tests_support import REPO, wait_for
 
 pytestmark = pytest.mark.e2e
@@ -176,7 +180,12 @@ async def test_executor_runs_a_plan_in_the_world(router: str, spawn: object) -> 
     seen, _, stats = await _run(router, spawn, corridor_plan())
     assert final(seen) == {f"s{i}": "succeeded" for i in range(1, 9)}
     robot = stats.agents[0]
-    assert (robot.moves, robot.counts["pickups"], robot.counts["recycled"], robot.failed) == (
+    assert (
+        robot.counts["moves"],
+        robot.counts["pickups"],
+        robot.counts["recycled"],
+        robot.failed,
+    ) == (
         6,
         1,
         1,
@@ -210,4 +219,4 @@ async def test_early_arrest_stops_after_the_running_step(router: str, spawn: obj
     assert report is not None and report.last_step == "s2"
     assert final(seen)["s2"] == "succeeded"
     assert report.cancelled == ["s3", "s4", "s5", "s6", "s7", "s8"]
-    assert stats.agents[0].moves == 2 and stats.epoch >= 6  # s1, s2 done; nothing after
+    assert stats.agents[0].counts["moves"] == 2 and stats.epoch >= 6  # s1, s2 done; nothing after

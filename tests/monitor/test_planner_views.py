@@ -139,7 +139,8 @@ def test_inspect_leaves_planner_counts_null_without_a_planner() -> None:
         agent=A, request_id="1", action="move", status="succeeded", reason="", epoch=1, time=1.0
     )
     report = inspect_messages(recorded([(keys.world_outcomes(A), moved)]))
-    assert report.agents[A].moves == 1
+    assert report.agents[A].actions == {"move:succeeded": 1}
+    assert report.agents[A].counters == {}  # no world info recorded: no domain's counters
     assert report.agents[A].replans is None and report.agents[A].search_rounds is None
 
 

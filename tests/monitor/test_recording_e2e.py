@@ -86,20 +86,21 @@ def test_channels_name_agent_component_and_schema(recording: tuple[Path, dict, s
     assert percepts.message_encoding == "msgpack"
     assert percepts.metadata["agent"] == "robot1"
     assert percepts.metadata["component"] == "world"
-    assert percepts.metadata["schema"] == "cbdi.world.Percepts/1"
+    assert percepts.metadata["schema"] == "cbdi.recycling.Percepts/1"
     assert summary.schemas[percepts.schema_id].encoding == "jsonschema"
     seqs = [m.seq for m in read_messages(path, ["cbdi/world/clock"])]
     assert seqs == list(range(1, len(seqs) + 1))  # the sender's sequence, none missing
 
 
-def test_inspect_reports_the_worlds_moves(recording: tuple[Path, dict, str]) -> None:
+def test_inspect_reports_the_domains_counters(recording: tuple[Path, dict, str]) -> None:
     path, summary, _ = recording
     result = run("cbdi", "inspect", str(path), "--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     robot = report["agents"]["robot1"]
-    assert robot["moves"] == summary["stats"]["agents"]["robot1"]["moves"] == 22
-    assert robot["recycled"] == 3 and report["result"] == "done"
+    assert report["simulator"] == "recycling"  # its counters: what the domain registers
+    assert robot["counters"]["moves"] == summary["stats"]["agents"]["robot1"]["moves"] == 22
+    assert robot["counters"]["recycled"] == 3 and report["result"] == "done"
     assert robot["first_action_time"] == 0.0
     assert robot["replans"] is None and robot["search_rounds"] is None  # no planner
     text = run("cbdi", "inspect", str(path)).stdout

@@ -23,8 +23,7 @@ from cbdi_monitor.reenact import Await, Output, Send, outputs_of, script_of, she
 
 MEMBERS = ["robot1/planner", "robot1/scheduler", "robot1/executor"]
 INFO = WorldInfo(
-    map_name="m", width=1, height=1, walls=[], bins=[], agents=["robot1"],
-    detection_depth={}, capacity=3, epoch_duration=1.0, durations={}, members=MEMBERS,
+    map_name="m", agents=["robot1"], epoch_duration=1.0, durations={}, members=MEMBERS,
 )  # fmt: skip
 
 

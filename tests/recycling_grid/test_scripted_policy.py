@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import pytest
 from cbdi_recycling.scripted.policy import Beliefs, Step, greedy_step, next_hop, parse_script
+from cbdi_recycling.wire import Percepts
 
-from cbdi.wire.world import ItemView, Percepts
+from cbdi.wire.world import (
+    ItemView,
+)
 
 
 def beliefs(**kw: object) -> Beliefs:

@@ -42,7 +42,7 @@ def test_move_takes_one_epoch_and_counts() -> None:
     assert reply.accepted and (reply.starts_at, reply.ends_at) == (0.0, 1.0)
     assert w.agents["r"].cell == (1, 1)  # logically still in the source until completion
     assert run(w, 1) == ["move:succeeded:"]
-    assert w.agents["r"].cell == (2, 1) and w.stats("r").agents[0].moves == 1
+    assert w.agents["r"].cell == (2, 1) and w.stats("r").agents[0].counts["moves"] == 1
 
 
 @pytest.mark.parametrize(
@@ -98,7 +98,7 @@ def test_pickup_and_recycle_follow_the_domain() -> None:
     assert run(w, 3) == ["recycle:succeeded:"]
     assert w.done and w.recycled == ["plastic_4_1"]
     s = w.stats().agents[0]
-    assert (s.moves, s.counts["pickups"], s.counts["recycled"]) == (6, 1, 1)
+    assert (s.counts["moves"], s.counts["pickups"], s.counts["recycled"]) == (6, 1, 1)
 
 
 def test_capacity_is_enforced() -> None:
@@ -125,7 +125,7 @@ def test_two_agents_into_one_cell_first_by_name_wins() -> None:
     outcomes = {o.agent: o for o in w2.step().outcomes}
     assert outcomes["amy"].status == "succeeded"
     assert outcomes["zed"].reason == "blocked by agent amy"
-    assert w2.stats("zed").agents[0].blocked == 1
+    assert w2.stats("zed").agents[0].counts["blocked"] == 1
 
 
 def test_people_walk_their_loop_every_move_step_and_wait_when_blocked() -> None:
@@ -240,7 +240,7 @@ def test_bodies_glide_to_cell_centres_and_contacts_are_counted() -> None:
     w.step()  # the robot leaves (1,0) for (2,0) as the walker steps into (1,0) behind it
     snap = w.snapshot()
     assert snap.agents[0].pose == (2.5, 0.5) and snap.people[0].pose == (1.5, 0.5)
-    assert w.stats("r").agents[0].contacts >= 1
+    assert w.stats("r").agents[0].counts["contacts"] >= 1
 
 
 def _replay(seed: int, script: list[tuple[str, str, tuple[int, int] | None]]) -> list[object]:

@@ -101,7 +101,7 @@ async def test_agent_pursues_its_desire_to_the_end(
         recycle = [s for s in seen if s[0] == "recycle"]  # make_way comes and goes too
         assert recycle[:2] == [("recycle", "added"), ("recycle", "activated")]
         stats = await request(bus, keys.world_rpc("stats"), StatsRequest(), WorldStats)
-        assert stats.totals["litter_recycled"] == 1 and stats.agents[0].moves == 6
+        assert stats.totals["litter_recycled"] == 1 and stats.agents[0].counts["moves"] == 6
     finally:
         await bus.close()
     await asyncio.sleep(0.3)
@@ -114,5 +114,5 @@ async def test_agent_pursues_its_desire_to_the_end(
     # Two goals at least: recycling, then making way from the bin (its search gets no
     # plan here). The test sends its plan in wall time: while it is on its way, the idle
     # robot may also come to explore (and reach) a cell it passes.
-    assert (robot.plans, robot.moves) == (1, 6) and robot.goals_achieved >= 2
+    assert (robot.plans, robot.actions["move:succeeded"]) == (1, 6) and robot.goals_achieved >= 2
     assert convert(recording, tmp_path / "agent.rrd") > 0

@@ -13,6 +13,7 @@ import pytest
 from cbdi_recycling.events import OBSTACLE_MEMORY, believe_others, seen_others
 from cbdi_recycling.knowledge import RecyclingKnowledge
 from cbdi_recycling.maps import load_map
+from cbdi_recycling.wire import AgentSeen, Percepts
 from cbdi_recycling.world import AgentSpec, World
 
 import cbdi_scheduler.asking as asking
@@ -24,7 +25,6 @@ from cbdi.runtime.together import Together, TogetherService
 from cbdi.security.policy import grants
 from cbdi.wire import decode, encode
 from cbdi.wire.agent import AgentReply, AgentRequest
-from cbdi.wire.world import AgentSeen, Percepts
 from cbdi_scheduler.agentfile import AgentFileError, load_agent
 from cbdi_scheduler.desires import Desire
 from cbdi_scheduler.mind import Mind

@@ -7,10 +7,13 @@ from pathlib import Path
 import msgspec
 import pytest
 from cbdi_recycling.events import UNKNOWN_DISTANCE, distance
+from cbdi_recycling.wire import Percepts
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.wire.agent import Claim
-from cbdi.wire.world import ItemView, Percepts
+from cbdi.wire.world import (
+    ItemView,
+)
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.mind import Mind, Reaction
@@ -138,10 +141,10 @@ def test_a_robot_holding_an_item_owns_it_whatever_else_was_claimed() -> None:
     a.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=0, cost=1.0))
     assert a.claim([("recycled", "p1")], 30, lambda item: 9.0) != []
     assert a.owner("p1") == "robot1"
-    again = a.claim([("recycled", "p1")], 31, lambda item: 9.0, holding={"p1"})
+    again = a.claim([("recycled", "p1")], 31, lambda item: 9.0, in_hand={"p1"})
     assert [(c.item, c.cost, c.epoch) for c in again] == [("p1", -1.0, 30)]
     assert a.owner("p1") == "robot2"
-    assert a.claim([("recycled", "p1")], 32, lambda item: 9.0, holding={"p1"}) == []
+    assert a.claim([("recycled", "p1")], 32, lambda item: 9.0, in_hand={"p1"}) == []
 
 
 def test_a_robot_that_picked_up_an_item_another_owned_takes_it_into_its_goal() -> None:
@@ -167,22 +170,11 @@ def test_distances_on_the_30x30_campus_are_shortest_paths_and_fast() -> None:
     from cbdi_recycling.events import Distances, map_beliefs
     from cbdi_recycling.maps import load_map
 
-    from cbdi.wire.world import BinView, WorldInfo
+    from tests_support import grid_info
 
     root = Path(__file__).resolve().parents[2]
     m = load_map(root / "domains/recycling/maps/campus-30x30.toml")
-    info = WorldInfo(
-        map_name=m.name,
-        width=m.width,
-        height=m.height,
-        walls=sorted(m.walls),
-        bins=[BinView(name=n, cell=c) for n, c in m.bins.items()],
-        agents=["r"],
-        detection_depth={"r": 1},
-        capacity=3,
-        epoch_duration=1.0,
-        durations={},
-    )
+    info = grid_info(m.width, m.height, sorted(m.walls), dict(m.bins), ("r",), m.name)
     base = BeliefSet.of(map_beliefs(info))
     cells = sorted(n for n, t in base.instances.items() if t == "cell")
     start, far = cells[0], cells[-1]

@@ -5,30 +5,23 @@ from __future__ import annotations
 
 from cbdi_recycling.events import exploration_target, map_beliefs
 from cbdi_recycling.knowledge import EXPLORE_AFTER, RecyclingKnowledge
+from cbdi_recycling.wire import Percepts
 
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.world import BinView, ItemView, Percepts, WorldInfo
+from cbdi.wire.world import (
+    ItemView,
+    WorldInfo,
+)
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
-from tests_support import REPO
+from tests_support import REPO, grid_info
 
 AGENT = REPO / "domains/recycling/agents/recycler.toml"
 
 
 def info() -> WorldInfo:
     # A 4x3 room with a wall at (1, 1) and a bin at (3, 2).
-    return WorldInfo(
-        map_name="room",
-        width=4,
-        height=3,
-        walls=[(1, 1)],
-        bins=[BinView(name="bin1", cell=(3, 2))],
-        agents=["robot1"],
-        detection_depth={"robot1": 1},
-        capacity=3,
-        epoch_duration=1.0,
-        durations={},
-    )
+    return grid_info(4, 3, [(1, 1)], {"bin1": (3, 2)}, map_name="room")
 
 
 def seen(time: float, at: tuple[int, int], free: list[tuple[int, int]]) -> Percepts:

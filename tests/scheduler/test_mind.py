@@ -5,9 +5,14 @@ from __future__ import annotations
 from itertools import pairwise
 from pathlib import Path
 
+from cbdi_recycling.wire import Percepts
+
 from cbdi.beliefs import fact, instance
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan, PlanStep
-from cbdi.wire.world import ActionOutcome, ItemView, Percepts
+from cbdi.wire.world import (
+    ActionOutcome,
+    ItemView,
+)
 from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
 

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import pytest
 from cbdi_recycling.events import revise_from_percepts
+from cbdi_recycling.wire import Percepts
 from msgspec.structs import replace
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ItemView, Percepts
+from cbdi.wire.world import (
+    ItemView,
+)
 from cbdi_scheduler.conditions import Literal, bindings, holds
 from cbdi_scheduler.desires import Desire, achieved, drops, select_desire
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect, fire_rules
@@ -220,20 +223,9 @@ def test_an_obstacle_out_of_sight_is_forgotten_but_bins_stay() -> None:
 def test_map_beliefs_describe_the_grid() -> None:
     from cbdi_recycling.events import map_beliefs
 
-    from cbdi.wire.world import BinView, WorldInfo
+    from tests_support import grid_info
 
-    info = WorldInfo(
-        map_name="m",
-        width=3,
-        height=2,
-        walls=[(1, 0)],
-        bins=[BinView(name="bin_0_0", cell=(0, 0))],
-        agents=["r"],
-        detection_depth={"r": 1},
-        capacity=3,
-        epoch_duration=1.0,
-        durations={},
-    )
+    info = grid_info(3, 2, [(1, 0)], {"bin_0_0": (0, 0)}, ("r",))
     beliefs = BeliefSet.of(map_beliefs(info))
     assert beliefs.holds(fact("map_loaded")) and beliefs.holds(instance("c_2_1", "cell"))
     assert not beliefs.holds(instance("c_1_0", "cell"))  # a wall is no cell

@@ -27,7 +27,7 @@ from cbdi_scheduler.agentfile import load_agent
 from cbdi_scheduler.mind import Mind
 from cbdi_scheduler.service import SchedulerSettings, scheduler_main
 from tests.scheduler.test_mind import percepts
-from tests_support import REPO
+from tests_support import REPO, grid_info
 
 AGENT = REPO / "domains/recycling/agents/recycler.toml"
 
@@ -102,11 +102,7 @@ async def test_a_scheduler_started_before_its_world_waits_for_it_and_keeps_locks
             reason="", time=0.0,
         )  # fmt: skip
         await bus.publish(keys.executor_status("robot1"), encode(status))
-        info = WorldInfo(
-            map_name="room", width=4, height=3, walls=[], bins=[], agents=["robot1"],
-            detection_depth={"robot1": 1}, capacity=3, epoch_duration=1.0, durations={},
-            members=["robot1/scheduler"], lockstep=True,
-        )  # fmt: skip
+        info = grid_info(4, 3, map_name="room", members=["robot1/scheduler"], lockstep=True)
 
         async def answer(key: str, req: WorldInfoRequest) -> WorldInfo:
             return info

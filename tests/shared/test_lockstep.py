@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+from cbdi_recycling.wire import Percepts
 
 from cbdi import keys, lockstep
 from cbdi.bus import LogSink, MemoryNetwork, messages
@@ -13,7 +14,12 @@ from cbdi.bus.typed import Stamped, serve
 from cbdi.lockstep import WORLD, EpochGate, Lockstep, Need, resend_latest_ack, send_ack
 from cbdi.wire.agent import BeliefsUpdate
 from cbdi.wire.base import Message
-from cbdi.wire.world import EpochAck, Percepts, Tick, WorldInfo, WorldInfoRequest
+from cbdi.wire.world import (
+    EpochAck,
+    Tick,
+    WorldInfo,
+    WorldInfoRequest,
+)
 
 BELIEFS = "cbdi/r1/scheduler/beliefs"
 PLANS = "cbdi/r1/scheduler/plans"
@@ -282,8 +288,7 @@ async def test_a_world_not_up_yet_is_asked_again_not_taken_for_none(
     assert not await step.rejoin()
     assert step.lockstep_member is None
     info = WorldInfo(
-        map_name="m", width=1, height=1, walls=[], bins=[], agents=["r1"],
-        detection_depth={}, capacity=1, epoch_duration=1.0, durations={},
+        map_name="m", agents=["r1"], epoch_duration=1.0, durations={},
         members=[S], lockstep=True,
     )  # fmt: skip
 

@@ -7,13 +7,17 @@ import re
 
 import msgpack
 import pytest
+from cbdi_recycling.wire import Percepts
 from hypothesis import given
 from hypothesis import strategies as st
 
 from cbdi.errors import WireError
 from cbdi.wire import decode, decode_any, encode, schema_of
 from cbdi.wire.common import ErrorReply
-from cbdi.wire.world import ActionRequest, Percepts, Tick
+from cbdi.wire.world import (
+    ActionRequest,
+    Tick,
+)
 
 
 def test_round_trip_keeps_every_field() -> None:
@@ -156,11 +160,13 @@ PERCEPTS = {
 def test_schema_valid_nonsense_is_rejected_naming_the_field(
     cls: str, fields: dict[str, object], where: str
 ) -> None:
+    import cbdi_recycling.wire
+
     import cbdi.wire.agent
     import cbdi.wire.planner
     import cbdi.wire.world
 
-    modules = (cbdi.wire.agent, cbdi.wire.planner, cbdi.wire.world)
+    modules = (cbdi.wire.agent, cbdi.wire.planner, cbdi.wire.world, cbdi_recycling.wire)
     message = next(getattr(m, cls) for m in modules if hasattr(m, cls))
     with pytest.raises(WireError, match=re.escape(where)):
         decode(_tagged(message, **fields), message)

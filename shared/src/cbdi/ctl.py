@@ -2,7 +2,7 @@
 
     cbdi ctl show robot1 [--watch 1] [--no-beliefs] [--json]
     cbdi ctl desire add robot1 visit "(in robot1 c_3_3)" --priority 0.9 --deadline 60 \\
-        [--precondition "(map_loaded)"] [--context "(not (holding robot1 pla1))"]
+        [--precondition "(map_loaded)"] [--context "(not (carrying robot1 p1))"]
     cbdi ctl desire remove robot1 visit          cbdi ctl desire check robot1 visit
     cbdi ctl belief add robot1 "(delivered p1)"   (also remove, check)
     cbdi ctl stop robot1 [robot2 ...] | --all      cbdi ctl resume robot1 | --all
@@ -18,7 +18,7 @@ both, and the scheduler plans the intention again from the beliefs of then.
 Every other change goes through the agent's multi-agent request endpoint (its scheduler's
 `rpc/request`), as another agent's would, under `--group` (default `operator`, which the
 agent file must list in `allowed_groups`). Each `--precondition` or `--context` flag is
-one clause, a list of literals that must all hold; any one clause holding will do.
+one clause, a list of literals that must all hold; any one clause that holds will do.
 
 Exit codes: 0 accepted (for `check`: it holds), 1 refused with the reason (for `check`:
 it does not hold), 2 bad usage, 3 no answer (no router, no such agent running).

@@ -14,7 +14,11 @@ from dataclasses import dataclass, field
 from cbdi import keys
 from cbdi.bus.typed import Stamped
 from cbdi.wire.base import Message
-from cbdi.wire.world import ACK_STAGES, PERCEPTS, EpochAck
+from cbdi.wire.world import (
+    ACK_STAGES,
+    EpochAck,
+    Percept,
+)
 
 __all__ = ["WORLD", "EpochGate", "GateResult", "Need", "default_sender", "stage_rank"]
 
@@ -123,7 +127,7 @@ class EpochGate:
                 pass  # counted as received (what follows counts it), not handled twice
             else:
                 s.buffer.append(item)
-                if isinstance(msg, PERCEPTS):
+                if isinstance(msg, Percept):
                     if (self.rebase or self.late_world) and WORLD not in self.based:
                         self.based.add(WORLD)  # a late join: what it counted before is gone
                         for k, n in msg.sent.items():
@@ -224,7 +228,7 @@ class EpochGate:
                 (
                     i + 1
                     for i, item in enumerate(s.buffer)
-                    if isinstance(item.message, PERCEPTS) and item.message.epoch >= need.epoch
+                    if isinstance(item.message, Percept) and item.message.epoch >= need.epoch
                 ),
                 len(s.buffer) if need.epoch < 0 else 0,
             )

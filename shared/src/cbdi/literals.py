@@ -9,7 +9,7 @@ both into beliefs with no knowledge of the domain at all; an agent file names it
 A domain that wants more (memory of what was seen, what a claim costs) subclasses it:
 
     class CourierKnowledge(LiteralKnowledge):
-        holding_predicate = "carrying"      # (carrying ?robot ?parcel): claims in hand win
+        in_hand_predicate = "carrying"      # (carrying ?robot ?parcel): claims in hand win
 
         def cost(self, beliefs, agent, item):
             return path_length(beliefs, agent, item)
@@ -18,7 +18,12 @@ A domain that wants more (memory of what was seen, what a claim costs) subclasse
 from __future__ import annotations
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ActionOutcome, Percepts, Sensed, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    Percept,
+    Sensed,
+    WorldInfo,
+)
 
 __all__ = ["LiteralKnowledge", "map_beliefs", "revise"]
 
@@ -49,7 +54,7 @@ def revise(beliefs: BeliefSet, sensed: Sensed) -> BeliefSet:
 class LiteralKnowledge:
     """One agent's knowledge of a domain whose world speaks in beliefs (`Sensed`)."""
 
-    holding_predicate = ""  # `(P ?agent ?object)`: the objects an agent holds ("" none)
+    in_hand_predicate = ""  # `(P ?agent ?object)`: the objects an agent holds ("" none)
 
     def __init__(self, agent: str) -> None:
         self.agent = agent
@@ -57,7 +62,7 @@ class LiteralKnowledge:
     def map_beliefs(self, info: WorldInfo) -> list[Belief]:
         return map_beliefs(info)
 
-    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts | Sensed) -> BeliefSet:
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percept) -> BeliefSet:
         if isinstance(percepts, Sensed):
             return revise(beliefs, percepts)
         return beliefs  # the grid world's percepts: its domain's knowledge reads them
@@ -68,7 +73,7 @@ class LiteralKnowledge:
     def cost(self, beliefs: BeliefSet, agent: str, item: str) -> float:
         return 0.0  # every claim costs the same: the group's order decides
 
-    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
-        if not self.holding_predicate:
+    def in_hand(self, beliefs: BeliefSet, agent: str) -> set[str]:
+        if not self.in_hand_predicate:
             return set()
-        return {f[2] for f in beliefs.facts_of(self.holding_predicate) if f[1:2] == (agent,)}
+        return {f[2] for f in beliefs.facts_of(self.in_hand_predicate) if f[1:2] == (agent,)}

@@ -42,7 +42,12 @@ from cbdi.epoch_gate import WORLD, EpochGate, GateResult, Need, default_sender, 
 from cbdi.errors import CbdiError
 from cbdi.view import world_info
 from cbdi.wire.base import Message
-from cbdi.wire.world import PERCEPTS, ClockRequest, EpochAck, Tick
+from cbdi.wire.world import (
+    ClockRequest,
+    EpochAck,
+    Percept,
+    Tick,
+)
 
 __all__ = [
     "WORLD",
@@ -132,7 +137,7 @@ class Lockstep:
         acknowledged it already sends that ack again (the world's successor waits for
         it). Its liveliness token alone cannot tell: the new world's token may come
         before the old one's goes (a killed process's lease has yet to run out)."""
-        if self.bus is None or not self.me or not isinstance(msg, (Tick, *PERCEPTS)):
+        if self.bus is None or not self.me or not isinstance(msg, (Tick, Percept)):
             return
         latest = _LATEST.get(self.bus, {}).get(self.me)
         if latest is not None and latest.epoch >= msg.epoch >= 0:

@@ -54,8 +54,7 @@ from cbdi.wire.world import (
     ActionOutcome,
     ActionReply,
     ActionRequest,
-    Percepts,
-    Sensed,
+    Percept,
     WorldInfo,
     WorldSnapshot,
     WorldStats,
@@ -101,7 +100,7 @@ class EpochResult:
     epoch: int
     time: float
     outcomes: Sequence[ActionOutcome]
-    percepts: Sequence[Percepts | Sensed]
+    percepts: Sequence[Percept]
     snapshot: WorldSnapshot
     spawned: Sequence[str] = field(default_factory=list)
 

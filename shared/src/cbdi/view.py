@@ -32,23 +32,25 @@ _AGENT_MARKS = string.digits[1:] + string.ascii_uppercase
 
 
 def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | None = None) -> str:
-    """Draw the grid: `#` wall, `B` bin, `@` person (a moving obstacle), `*` an item
-    known from the start, `+` one found, 1-9/A-Z robots; then what each agent intends
-    (`intents`: agent -> text), if known."""
-    grid = [["." for _ in range(info.width)] for _ in range(info.height)]
-    for x, y in info.walls:
-        grid[y][x] = "#"
-    for b in info.bins:
-        grid[b.cell[1]][b.cell[0]] = "B"
+    """Draw the map: its static layers (`WorldInfo.view`: `#` walls and whatever glyph
+    each of the domain's layers has), `@` person (a moving obstacle), `*` an item known
+    from the start, `+` one found, 1-9/A-Z robots; then what each agent intends
+    (`intents`: agent -> text), if known. A map without a view is drawn as big as the
+    cells the snapshot holds."""
+    width, height = _extent(info, snap)
+    grid = [["." for _ in range(width)] for _ in range(height)]
+    for layer in info.view.layers if info.view else []:
+        for x, y in layer.cells:
+            _mark(grid, (x, y), layer.glyph)
     for item in snap.items:
-        grid[item.cell[1]][item.cell[0]] = "*" if item.known else "+"
+        _mark(grid, item.cell, "*" if item.known else "+")
     for p in snap.people:
-        grid[p.cell[1]][p.cell[0]] = "@"
+        _mark(grid, p.cell, "@")
     legend = []
     for i, a in enumerate(snap.agents):
         mark = _AGENT_MARKS[i % len(_AGENT_MARKS)]
-        grid[a.cell[1]][a.cell[0]] = mark
-        load = f" holding {len(a.holding)}" if a.holding else ""
+        _mark(grid, a.cell, mark)
+        load = f" carrying {len(a.load)}" if a.load else ""
         doing = f" {a.action}" if a.action else ""
         legend.append(f"{mark}={a.name}{load}{doing}")
     header = (
@@ -58,6 +60,22 @@ def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | No
     rows = [" ".join(row) for row in grid]
     intending = [f"{a}: {text}" for a, text in sorted((intents or {}).items())]
     return "\n".join([header, *rows, "  ".join(legend), *intending])
+
+
+def _extent(info: WorldInfo, snap: WorldSnapshot) -> tuple[int, int]:
+    """The map's size: its view's, or what holds every cell of the snapshot."""
+    if info.view is not None:
+        return info.view.width, info.view.height
+    cells = [a.cell for a in snap.agents] + [p.cell for p in snap.people]
+    cells += [i.cell for i in snap.items]
+    return max((c[0] + 1 for c in cells), default=1), max((c[1] + 1 for c in cells), default=1)
+
+
+def _mark(grid: list[list[str]], cell: tuple[int, int], glyph: str) -> None:
+    """Put `glyph` on `cell`, if it is on the grid."""
+    x, y = cell
+    if 0 <= y < len(grid) and 0 <= x < len(grid[y]):
+        grid[y][x] = glyph
 
 
 class Intentions:

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from cbdi.errors import ConfigError
+from cbdi.wire.world import MapLayer, MapView
 
 __all__ = ["Cart", "Floor", "Parcel", "cell_name", "load_floor"]
 
@@ -83,6 +84,14 @@ class Floor:
 
     def floor_cell(self, c: Cell) -> bool:
         return 0 <= c[0] < self.width and 0 <= c[1] < self.height and c not in self.walls
+
+    def view(self) -> MapView:
+        """How the views draw the floor: walls (`#`) and docks (`D`)."""
+        walls = MapLayer(name="walls", cells=sorted(self.walls))
+        docks = MapLayer(
+            name="docks", cells=sorted(self.docks), glyph="D", colour=(60, 90, 200), size=0.8
+        )
+        return MapView(width=self.width, height=self.height, layers=[walls, docks])
 
     def links(self, c: Cell) -> list[Cell]:
         x, y = c

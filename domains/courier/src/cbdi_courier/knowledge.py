@@ -14,7 +14,10 @@ from collections import deque
 
 from cbdi.beliefs import BeliefSet, fact
 from cbdi.literals import LiteralKnowledge
-from cbdi.wire.world import Percepts, Sensed
+from cbdi.wire.world import (
+    Percept,
+    Sensed,
+)
 
 __all__ = ["FORGET_AFTER", "CourierKnowledge", "drives"]
 
@@ -45,13 +48,13 @@ def drives(beliefs: BeliefSet, start: str, goal: str) -> float:
 class CourierKnowledge(LiteralKnowledge):
     """What one courier robot's scheduler knows of its domain."""
 
-    holding_predicate = "carrying"
+    in_hand_predicate = "carrying"
 
     def __init__(self, agent: str) -> None:
         super().__init__(agent)
         self.taken: dict[str, float] = {}  # cell -> when last seen taken
 
-    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts | Sensed) -> BeliefSet:
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percept) -> BeliefSet:
         revised = super().on_percepts(beliefs, percepts)
         if not isinstance(percepts, Sensed):
             return revised

@@ -144,18 +144,13 @@ class CourierSimulator:
         fluents = [(["capacity", r], float(f.battery)) for r in self.robots]
         return WorldInfo(
             map_name=f.name,
-            width=f.width,
-            height=f.height,
-            walls=sorted(f.walls),
-            bins=[],
             agents=list(self.robots),
-            detection_depth={r: f.sensing for r in self.robots},
-            capacity=1,
             epoch_duration=f.epoch_duration,
             durations=dict(DURATIONS),
             instances=instances,
             facts=facts,
             fluents=fluents,
+            view=f.view(),
         )
 
     def request(self, req: ActionRequest) -> ActionReply:
@@ -196,7 +191,6 @@ class CourierSimulator:
         rows = [
             AgentStats(
                 agent=n,
-                moves=self.robots[n].counts.get("drive", 0),
                 failed=self.robots[n].counts.get("failed", 0),
                 rejected=self.robots[n].counts.get("rejected", 0),
                 busy=round(self.robots[n].busy, 9),
@@ -435,7 +429,7 @@ class CourierSimulator:
                 name=r.name,
                 cell=r.cell,
                 pose=(float(r.cell[0]), float(r.cell[1])),
-                holding=[r.carrying] if r.carrying else [],
+                load=[r.carrying] if r.carrying else [],
                 action=r.action.name if r.action else "",
             )
             for r in self.robots.values()

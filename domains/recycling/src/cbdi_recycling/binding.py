@@ -14,17 +14,31 @@ reason, and `cbdi up` refuses a domain with such an action before it starts anyt
 from __future__ import annotations
 
 import re
+from typing import Protocol
 
 from cbdi.errors import CbdiError
+from cbdi.plugins import load_plugin
 from cbdi.wire.world import ActionRequest, Cell
 
-__all__ = ["ACTIONS", "RecyclingBinding", "UnboundActionError", "cell_of"]
+__all__ = [
+    "ACTIONS",
+    "BINDINGS",
+    "ActionBinding",
+    "RecyclingBinding",
+    "UnboundActionError",
+    "cell_of",
+    "load_binding",
+]
 
 _CELL = re.compile(r"^c_(\d+)_(\d+)$")
 
 # PDDL action -> (the world's action, how many arguments it needs)
 _PRIMITIVES = {"move": ("move", 3), "litter_pickup": ("pickup", 2), "recycle": ("recycle", 2)}
 ACTIONS: tuple[str, ...] = tuple(_PRIMITIVES)
+
+# The entry-point group of bindings (another domain's PDDL actions on this grid); the
+# grid's option `binding` names one.
+BINDINGS = "cbdi.bindings"
 
 
 class UnboundActionError(CbdiError):
@@ -67,3 +81,21 @@ class RecyclingBinding:
         return ActionRequest(
             agent=req.agent, action=action, request_id=req.request_id, item=req.args[1]
         )
+
+
+class ActionBinding(Protocol):
+    """How the grid world performs a domain's PDDL actions."""
+
+    actions: tuple[str, ...]  # the PDDL actions it performs
+
+    def primitive(self, req: ActionRequest) -> ActionRequest:
+        """The world's own request for the grounded PDDL action `req`; raise CbdiError
+        (the reason the world rejects it) for an action or arguments it cannot perform."""
+        ...
+
+
+def load_binding(name: str, source: str = "world") -> ActionBinding:
+    """Return a new binding `name` (entry-point group `cbdi.bindings`)."""
+    factory = load_plugin(BINDINGS, name, source, "binding", "action binding")
+    binding: ActionBinding = factory()  # type: ignore[operator]
+    return binding

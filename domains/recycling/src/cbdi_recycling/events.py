@@ -19,7 +19,12 @@ from collections.abc import Collection
 import msgspec
 
 from cbdi.beliefs import Belief, BeliefSet, fact, fluent, instance
-from cbdi.wire.world import ActionOutcome, Cell, Percepts, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    Cell,
+    WorldInfo,
+)
+from cbdi_recycling.wire import Percepts, grid_map
 
 __all__ = [
     "OBSTACLE_MEMORY",
@@ -183,9 +188,10 @@ def map_beliefs(
     sensing says otherwise (people and robots are seen, not known in advance). Litter the
     world marks as known at the start is believed where it lies.
     """
-    walls: set[Cell] = {(w[0], w[1]) for w in info.walls}
-    bins: dict[Cell, str] = {(b.cell[0], b.cell[1]): b.name for b in info.bins}
-    cells = [(x, y) for y in range(info.height) for x in range(info.width) if (x, y) not in walls]
+    grid = grid_map(info)
+    walls: set[Cell] = {(w[0], w[1]) for w in grid.walls}
+    bins: dict[Cell, str] = {(b.cell[0], b.cell[1]): b.name for b in grid.bins}
+    cells = [(x, y) for y in range(grid.height) for x in range(grid.width) if (x, y) not in walls]
     out: list[Belief] = [fact("map_loaded")]
     for c in cells:
         out.append(instance(cell_name(c), "cell"))
@@ -193,7 +199,7 @@ def map_beliefs(
             out.append(fact("free", cell_name(c)))
         for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
             n = (c[0] + dx, c[1] + dy)
-            if n in walls or not (0 <= n[0] < info.width and 0 <= n[1] < info.height):
+            if n in walls or not (0 <= n[0] < grid.width and 0 <= n[1] < grid.height):
                 continue
             out.append(fact("near", cell_name(c), cell_name(n)))
     for cell, name in bins.items():

@@ -14,10 +14,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from cbdi import keys
-from cbdi.plugins import ActionBinding, load_binding
 from cbdi.simulator import OptionValue, SimulatorConfig
 from cbdi.wire.world import ActionReply, ActionRequest, Cell
-from cbdi_recycling.binding import ACTIONS
+from cbdi_recycling.binding import ACTIONS, ActionBinding, load_binding
 from cbdi_recycling.chance import Chance
 from cbdi_recycling.errors import GridError
 from cbdi_recycling.limits import chance_problems

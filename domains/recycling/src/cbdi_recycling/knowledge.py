@@ -15,7 +15,10 @@ others finishing, a short mission) out of the others' way.
 from __future__ import annotations
 
 from cbdi.beliefs import Belief, BeliefSet, fact
-from cbdi.wire.world import ActionOutcome, Percepts, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    WorldInfo,
+)
 from cbdi_recycling.events import (
     Distances,
     believe_others,
@@ -28,6 +31,7 @@ from cbdi_recycling.events import (
     seen_blocked,
     seen_others,
 )
+from cbdi_recycling.wire import Percepts
 
 __all__ = ["EXPLORE_AFTER", "RecyclingKnowledge"]
 
@@ -101,5 +105,5 @@ class RecyclingKnowledge:
     def cost(self, beliefs: BeliefSet, agent: str, item: str) -> float:
         return self.distances(beliefs, agent, item)
 
-    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
+    def in_hand(self, beliefs: BeliefSet, agent: str) -> set[str]:
         return {f[2] for f in beliefs.facts_of("holding") if f[1] == agent}

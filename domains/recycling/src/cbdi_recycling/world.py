@@ -18,14 +18,11 @@ from cbdi.wire.world import (
     ActionOutcome,
     ActionReply,
     ActionRequest,
-    AgentSeen,
     AgentStats,
     AgentView,
-    BinView,
     Cell,
     ItemView,
     OutcomeStatus,
-    Percepts,
     PersonView,
     WorldInfo,
     WorldSnapshot,
@@ -36,13 +33,14 @@ from cbdi_recycling.errors import GridError, UnknownAgentError
 from cbdi_recycling.maps import WorldMap
 from cbdi_recycling.physics import Physics
 from cbdi_recycling.rules import Action, check_request, complete, fail
+from cbdi_recycling.wire import AgentSeen, BinView, GridMap, Percepts, with_map
 
 __all__ = ["AgentSpec", "EpochResult", "World"]
 
 _EPS = 1e-9
 # The counters every world keeps (fields of AgentStats), and this world's own.
-_GENERIC_COUNTS = ("moves", "blocked", "failed", "rejected", "contacts")
-_OWN_COUNTS = ("pickups", "recycled")
+_GENERIC_COUNTS = ("failed", "rejected")
+_OWN_COUNTS = ("moves", "blocked", "contacts", "pickups", "recycled")  # the paper's metric first
 
 
 @dataclass(frozen=True)
@@ -351,7 +349,7 @@ class World:
                 name=n,
                 cell=a.cell,
                 pose=pose(n),
-                holding=list(a.holding),
+                load=list(a.holding),
                 action=a.action.name if a.action else "",
             )
             for n, a in self.agents.items()
@@ -385,8 +383,8 @@ class World:
         )
 
     def _agent_stats(self, name: str) -> AgentStats:
-        """One agent's row: the generic counters as fields, pickups and recycled in
-        `counts` (zero when nothing happened, as before they were fields)."""
+        """One agent's row: the generic counters as fields, the grid's own in `counts`
+        (zero when nothing happened)."""
         a = self.agents[name]
         generic = {k: v for k, v in a.stats.items() if k in _GENERIC_COUNTS}
         counts = {k: a.stats.get(k, 0) for k in _OWN_COUNTS}
@@ -395,18 +393,21 @@ class World:
     def info(self) -> WorldInfo:
         """The static part of the world."""
         m = self.map
-        return WorldInfo(
-            map_name=m.name,
+        grid = GridMap(
             width=m.width,
             height=m.height,
             walls=sorted(m.walls),
             bins=[BinView(name=n, cell=c) for n, c in m.bins.items()],
-            agents=list(self.agents),
-            detection_depth={n: a.spec.detection_depth for n, a in self.agents.items()},
             capacity=m.capacity,
+            detection_depth={n: a.spec.detection_depth for n, a in self.agents.items()},
+        )
+        info = WorldInfo(
+            map_name=m.name,
+            agents=list(self.agents),
             epoch_duration=m.epoch_duration,
             durations=dict(m.durations),
             known_items=[
                 ItemView(name=n, cell=c, known=True) for n, (c, known) in m.litter.items() if known
             ],
         )
+        return with_map(info, grid)

@@ -23,6 +23,7 @@ from cbdi.clock import SimClock, WallClock
 from cbdi.errors import CbdiError, RequestTimeoutError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.performer import outcomes_key, performer_key, stop_key
+from cbdi.plugins import percept_types
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import (
@@ -34,13 +35,11 @@ from cbdi.wire.agent import (
 )
 from cbdi.wire.base import Message
 from cbdi.wire.world import (
-    PERCEPTS,
     ActionOutcome,
     ActionReply,
     ActionRequest,
     EpochAck,
-    Percepts,
-    Sensed,
+    Percept,
     Tick,
 )
 from cbdi_executor.dispatcher import Dispatcher, Effects
@@ -53,8 +52,7 @@ INPUTS: tuple[type[Message], ...] = (
     PartialPlan,
     EarlyArrest,
     ActionOutcome,
-    Percepts,
-    Sensed,
+    *percept_types(),  # Sensed and the installed domains' own
     EpochAck,
 )
 
@@ -111,7 +109,7 @@ class ExecutorService:
         self.beliefs_in = BeliefsReceiver()
         self.outcome_epoch = -1
         self.acked = -1
-        self.holding = False  # lockstep: an epoch's inputs are being taken in, dispatch after
+        self.taking_in = False  # lockstep: an epoch's inputs are being taken in, dispatch after
         self.ack_timeout = ack_timeout
         self.lockstep = Lockstep(
             self.input_keys(),
@@ -136,7 +134,7 @@ class ExecutorService:
         """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""
         async for item in stream:
             for key, m in await self.lockstep.put(item):
-                if not isinstance(m, (EpochAck, *PERCEPTS)):
+                if not isinstance(m, (EpochAck, Percept)):
                     with dropping(self.ctx, key, m):
                         await self.handle(m)
                     await self.maybe_ack()
@@ -156,14 +154,14 @@ class ExecutorService:
             # Take in the whole epoch (outcomes, beliefs, plans, arrests) before anything
             # is dispatched: an outcome handled first would start the next step of a
             # plan the scheduler arrests in the same epoch.
-            self.holding = True
+            self.taking_in = True
             try:
                 for key, msg in released.messages:
-                    if not isinstance(msg, (EpochAck, *PERCEPTS)):
+                    if not isinstance(msg, (EpochAck, Percept)):
                         with dropping(self.ctx, key, msg):
                             await self.handle(msg)
             finally:
-                self.holding = False
+                self.taking_in = False
             await self.step()
             self.acked = epoch
             await send_ack(self.ctx.bus, self.agent, "executor", epoch)
@@ -221,7 +219,7 @@ class ExecutorService:
 
     async def step(self) -> None:
         """Dispatch what is due now (again after a refusal frees the next step)."""
-        while self.current() and not self.holding:
+        while self.current() and not self.taking_in:
             effects = self.dispatcher.tick(self.clock.now(), self.beliefs)
             await self.send(effects)
             if not any(st.status == "refused" for st in effects.statuses):

@@ -1,9 +1,11 @@
 """`cbdi inspect run.mcap`: what is in a recording, and what each agent did.
 
-Channels with message counts, the duration, and per agent: moves, actions by kind and
-outcome, failed and rejected actions, the simulated time of its first action, litter
-recycled, partial plans passed to the executor (`plans`), early arrests, goals achieved
-and desires dropped; and from its planner's messages (counted by `cbdi.tally`, as `cbdi
+Channels with message counts, the duration, and per agent: the domain's own counters
+(what its package registers under its simulator's name, entry point `cbdi.counters`:
+successes of an action by a counter's name, e.g. a grid robot's moves), actions by name
+and outcome, failed and rejected actions, the simulated time of its first action,
+partial plans passed to the executor (`plans`), early arrests, goals achieved and
+desires dropped; and from its planner's messages (counted by `cbdi.tally`, as `cbdi
 up` counts them live): plans published, replans (by purpose), forecast-triggered repairs,
 improvements, search rounds and the nodes they expanded, forecasts by kind. The planner
 counts are `null` for an agent whose planner said nothing (a scripted robot).
@@ -19,11 +21,12 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from cbdi.errors import CbdiError, WireError
+from cbdi.plugins import domain_counters
 from cbdi.tally import MESSAGES, SCHEMAS, PlannerTally
 from cbdi.wire.agent import ArrestReport, DesireEvent, PartialPlan
 from cbdi.wire.base import decode, decode_any
 from cbdi.wire.common import RunFinished
-from cbdi.wire.world import ActionOutcome, ActionRequest, Tick, WorldStats
+from cbdi.wire.world import ActionOutcome, ActionRequest, Tick, WorldInfo, WorldStats
 from cbdi_monitor.reader import RecordedMessage, read_messages
 
 __all__ = ["AgentReport", "Inspection", "inspect_messages", "main"]
@@ -35,12 +38,11 @@ ACT_REQUEST = "cbdi/trace/world/rpc/act/request"
 class AgentReport:
     """What one agent did in a recording."""
 
-    moves: int = 0
+    counters: dict[str, int] = field(default_factory=dict)  # the domain's, by name
     actions: dict[str, int] = field(default_factory=dict)
     failed: int = 0
     rejected: int = 0
     requests: int = 0
-    recycled: int = 0
     first_action_time: float | None = None
     plans: int = 0
     arrests: int = 0
@@ -66,6 +68,7 @@ class Inspection:
     sim_time: float = 0.0
     epochs: int = 0
     result: str = ""
+    simulator: str = ""  # the world's (`WorldInfo.simulator`): whose counters to count
     undecodable: int = 0
     agents: dict[str, AgentReport] = field(default_factory=dict)
     world_stats: dict[str, dict[str, int]] = field(default_factory=dict)
@@ -90,6 +93,7 @@ def inspect_messages(messages: Iterable[RecordedMessage]) -> Inspection:
             report.undecodable += 1
     for name in tally.agents:
         _planner(_agent(report, name), tally, name)
+    _count(report, domain_counters(report.simulator) if report.simulator else {})
     report.messages = sum(counts.values())
     report.channels = dict(sorted(counts.items()))
     report.duration_s = round((last_ns - first_ns) / 1e9, 3)
@@ -116,6 +120,8 @@ def _account(report: Inspection, m: RecordedMessage, now: float) -> float:
     elif m.schema == "cbdi.world.WorldStats/1":
         stats = decode(m.payload, WorldStats, m.key)
         report.world_stats = {a.agent: _stats_dict(a) for a in stats.agents}
+    elif m.schema == "cbdi.world.WorldInfo/1":
+        report.simulator = decode(m.payload, WorldInfo, m.key).simulator
     elif m.schema == "cbdi.RunFinished/1":
         report.result = decode(m.payload, RunFinished, m.key).reason
     else:
@@ -156,16 +162,17 @@ def _outcome(agent: AgentReport, o: ActionOutcome) -> None:
     agent.actions[key] = agent.actions.get(key, 0) + 1
     if o.status != "succeeded":
         agent.failed += 1
-    elif o.action == "move":
-        agent.moves += 1
-    elif o.action == "recycle":
-        agent.recycled += 1
+
+
+def _count(report: Inspection, counters: dict[str, str]) -> None:
+    """Fill each agent's domain counters: the successes of the action each one counts."""
+    for agent in report.agents.values():
+        agent.counters = {c: agent.actions.get(f"{a}:succeeded", 0) for c, a in counters.items()}
 
 
 def _stats_dict(a: Any) -> dict[str, int]:
-    """One agent's world counters: the generic ones, then the simulator's own."""
-    fields = ("moves", "blocked", "failed", "rejected", "contacts")
-    return {**{k: getattr(a, k) for k in fields}, **a.counts}
+    """One agent's world counters: the simulator's own, then the generic ones."""
+    return {**a.counts, "failed": a.failed, "rejected": a.rejected}
 
 
 def render(report: Inspection) -> str:
@@ -178,11 +185,11 @@ def render(report: Inspection) -> str:
     lines += [f"  {count:8d}  {key}" for key, count in report.channels.items()]
     for name, a in sorted(report.agents.items()):
         first = "-" if a.first_action_time is None else f"t={a.first_action_time:g}"
-        # moves and recycled are the recycling domain's; another domain's actions are
-        # counted on the next line
-        grid = f"moves={a.moves} recycled={a.recycled} " if a.moves or a.recycled else ""
+        own = (
+            "".join(f"{k}={v} " for k, v in a.counters.items()) if any(a.counters.values()) else ""
+        )
         lines.append(
-            f"agent {name}: {grid}failed={a.failed} requests={a.requests} first action at {first}"
+            f"agent {name}: {own}failed={a.failed} requests={a.requests} first action at {first}"
         )
         lines.append("    " + " ".join(f"{k}={v}" for k, v in sorted(a.actions.items())))
         if a.replans is not None:

@@ -2,7 +2,8 @@
 
 Entity layout (what a user sees in the viewer):
 
-- `world/map/walls`, `world/map/bins` (static boxes), `world/people`, `world/items`
+- `world/map/floor` and `world/map/<layer>` (static boxes: the layers of the map's
+  `WorldInfo.view`, e.g. walls and bins), `world/people`, `world/items`
 - `world/robots` (points labelled with names), `agents/<name>/intent` (the requested move)
 - `agents/<name>/log` (text log: requests, outcomes, desires, search requests, plans and
   replans with their purpose, failure forecasts, search fall-backs, step statuses, early
@@ -12,7 +13,8 @@ Entity layout (what a user sees in the viewer):
   up to the last committed step of the latest forecast, and what a replacing plan takes
   over from the old one up to its `applies_after`) thick, the rest, which a repair may
   still change, thin and pale
-- `plots/<name>/{moves,recycled,failed,blocked}` (from the world's statistics)
+- `plots/<name>/<counter>` (the world's statistics: moves, failed, blocked and the
+  simulator's own counters by name)
 - `plots/<name>/planner/{expanded,best_h,round_seconds,search_rounds}` per search round,
   `plots/<name>/planner/{replans,forecast_repairs,plan_steps}` per published plan,
   `plots/<name>/forecasts/<kind>` (forecasts so far, per kind; counted by `cbdi.tally`)
@@ -144,32 +146,29 @@ class RerunLogger:
         self.clock(tick.epoch, tick.time)
 
     def on_info(self, m: RecordedMessage) -> None:
-        rr, info = self.rr, decode(m.payload, WorldInfo, m.key)
+        """Draw the map's floor and each of its static layers (`WorldInfo.view`), if the
+        domain gave one."""
+        rr, view = self.rr, decode(m.payload, WorldInfo, m.key).view
+        if view is None:
+            return
         self.log(
             "world/map/floor",
-            rr.Boxes2D(mins=[[0, 0]], sizes=[[info.width, info.height]], colors=[(235, 235, 235)]),
+            rr.Boxes2D(mins=[[0, 0]], sizes=[[view.width, view.height]], colors=[(235, 235, 235)]),
             static=True,
         )
-        if info.walls:
+        for layer in view.layers:
+            half = layer.size / 2
+            labels = layer.labels if len(layer.labels) == len(layer.cells) else None
             self.log(
-                "world/map/walls",
+                f"world/map/{layer.name}",
                 rr.Boxes2D(
-                    centers=[(x + 0.5, y + 0.5) for x, y in info.walls],
-                    half_sizes=[(0.5, 0.5)] * len(info.walls),
-                    colors=[(60, 60, 60)],
+                    centers=[(x + 0.5, y + 0.5) for x, y in layer.cells],
+                    half_sizes=[(half, half)] * len(layer.cells),
+                    colors=[layer.colour],
+                    labels=labels,
                 ),
                 static=True,
             )
-        self.log(
-            "world/map/bins",
-            rr.Boxes2D(
-                centers=[(b.cell[0] + 0.5, b.cell[1] + 0.5) for b in info.bins],
-                half_sizes=[(0.4, 0.4)] * len(info.bins),
-                colors=[(40, 140, 60)],
-                labels=[b.name for b in info.bins],
-            ),
-            static=True,
-        )
 
     def on_snapshot(self, m: RecordedMessage) -> None:
         rr, snap = self.rr, decode(m.payload, WorldSnapshot, m.key)
@@ -180,9 +179,7 @@ class RerunLogger:
                 [a.pose for a in snap.agents],
                 radii=0.35,
                 colors=[self.colour(a.name) for a in snap.agents],
-                labels=[
-                    f"{a.name} ({len(a.holding)})" if a.holding else a.name for a in snap.agents
-                ],
+                labels=[f"{a.name} ({len(a.load)})" if a.load else a.name for a in snap.agents],
             ),
         )
         self.cells.update((a.name, a.cell) for a in snap.agents)
@@ -231,8 +228,8 @@ class RerunLogger:
     def on_stats(self, m: RecordedMessage) -> None:
         rr, stats = self.rr, decode(m.payload, WorldStats, m.key)
         for a in stats.agents:
-            counters = {"moves": a.moves, "failed": a.failed, "blocked": a.blocked, **a.counts}
-            for name, value in counters.items():  # the generic ones, then the simulator's
+            counters = {**a.counts, "failed": a.failed}
+            for name, value in counters.items():  # the simulator's own, then failures
                 self.log(f"plots/{a.agent}/{name}", rr.Scalars(value))
 
     def on_alive(self, m: RecordedMessage) -> None:

@@ -11,6 +11,7 @@ import cbdi.wire.agent
 import cbdi.wire.common
 import cbdi.wire.planner
 import cbdi.wire.world
+from cbdi.plugins import percept_types
 from cbdi.wire.base import Message, schema_of
 
 __all__ = ["json_schema", "peek_schema", "wire_classes"]
@@ -33,13 +34,17 @@ def peek_schema(payload: bytes) -> str:
 
 @cache
 def wire_classes() -> dict[str, type[Message]]:
-    """Return every known message class by its schema name."""
+    """Return every known message class by its schema name: the core's and the
+    installed domains' (their percepts, `cbdi.plugins.percept_types`, are imported
+    here); a base class without a versioned schema (`Percept`) is none."""
+    percept_types()
     found: dict[str, type[Message]] = {}
     todo = list(Message.__subclasses__())
     while todo:
         cls = todo.pop()
         todo.extend(cls.__subclasses__())
-        found[schema_of(cls)] = cls
+        if "/" in schema_of(cls):
+            found[schema_of(cls)] = cls
     return found
 
 

@@ -40,7 +40,7 @@ def bit_positions(mask: int) -> tuple[int, ...]:
     Scanning the binary text is linear in the width; peeling off the lowest bit of a
     wide int costs a copy of the int per bit (a state of a 30x30 map has 650 of them).
     """
-    text = bin(mask)[:1:-1]
+    text = format(mask, "b")[::-1]
     out = []
     i = text.find("1")
     while i >= 0:

@@ -10,7 +10,7 @@ an item over); items are assigned in order of their earliest claim, then their
 cheapest claim (`cost`: the claimer's path length to it), and each goes to the claimer
 with the lowest cost plus `LOAD_COST` for every item it already got (so one robot near
 all the items does not get all of them), ties to the first name. An agent that holds an
-item claims it again with cost `HOLDING` (negative), and a holder owns its item whatever
+item claims it again with cost `IN_HAND` (negative), and a holder owns its item whatever
 the other claims say; an agent strips the
 atoms of items others own from its desires, and drops a desire left with no goal. A
 claim is released when the agent gives the atom up (its desire dropped), so another
@@ -26,11 +26,11 @@ from dataclasses import dataclass, field
 
 from cbdi.wire.agent import Claim
 
-__all__ = ["HOLDING", "LOAD_COST", "WINDOW", "Claims"]
+__all__ = ["IN_HAND", "LOAD_COST", "WINDOW", "Claims"]
 
 LOAD_COST = 5.0  # what one more item in hand weighs against a longer way to the next
 WINDOW = 5  # epochs: claims this close to an item's first claim compete for it
-HOLDING = -1.0  # the cost of a claim on an item in hand
+IN_HAND = -1.0  # the cost of a claim on an item in hand
 
 
 @dataclass
@@ -56,11 +56,11 @@ class Claims:
         atoms: Iterable[tuple[str, ...]],
         epoch: int,
         cost: Callable[[str], float] = lambda item: 0.0,
-        holding: Iterable[str] = (),
+        in_hand: Iterable[str] = (),
     ) -> list[Claim]:
         """Claim the items of `atoms` not claimed by this agent yet, and again those it now
-        holds (cost HOLDING); return the messages."""
-        held = set(holding)
+        holds (cost IN_HAND); return the messages."""
+        held = set(in_hand)
         out = []
         for atom in atoms:
             item = self.claimable(atom)
@@ -69,7 +69,7 @@ class Claims:
             before = self.held.get(item, {}).get(self.agent)
             if before is not None and (before[1] < 0 or item not in held):
                 continue
-            c = HOLDING if item in held else float(cost(item))
+            c = IN_HAND if item in held else float(cost(item))
             at = before[0] if before is not None else epoch
             self.held.setdefault(item, {})[self.agent] = (at, c)
             self._owners = None

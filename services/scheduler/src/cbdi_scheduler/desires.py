@@ -2,7 +2,7 @@
 
 A desire is a goal (predicate literals to make true) with a priority, a deadline (an
 absolute simulated time once the desire is held), a precondition that must hold to
-activate it and a context that must keep holding while it is pursued.
+activate it and a context that must hold all the while it is pursued.
 
 The deadline is for planning, as in the paper: a desire not taken up by then is dropped.
 The desire whose plan is executing gets `rtc_deadline` times its span (ROS2-BDI's
@@ -152,7 +152,7 @@ def drops(
 
 def ready(desire: Desire, beliefs: BeliefSet, now: float) -> bool:
     """Whether `desire` may be pursued now: deadline ahead, not achieved, precondition
-    holding."""
+    true."""
     return (
         now <= desire.deadline
         and not achieved(desire, beliefs)

@@ -19,7 +19,11 @@ from typing import Protocol, cast
 
 from cbdi.beliefs import Belief, BeliefSet
 from cbdi.plugins import installed, load_plugin
-from cbdi.wire.world import ActionOutcome, Percepts, Sensed, WorldInfo
+from cbdi.wire.world import (
+    ActionOutcome,
+    Percept,
+    WorldInfo,
+)
 
 __all__ = ["GROUP", "DomainKnowledge", "available", "load_knowledge"]
 
@@ -33,7 +37,7 @@ class DomainKnowledge(Protocol):
         """The beliefs the world's map gives."""
         ...
 
-    def on_percepts(self, beliefs: BeliefSet, percepts: Percepts | Sensed) -> BeliefSet:
+    def on_percepts(self, beliefs: BeliefSet, percepts: Percept) -> BeliefSet:
         """`beliefs` revised with one epoch's percepts (the grid world's, or a simulator's
         generic `Sensed`)."""
         ...
@@ -46,7 +50,7 @@ class DomainKnowledge(Protocol):
         """What pursuing goal object `item` costs `agent` (lower wins a claim)."""
         ...
 
-    def holding(self, beliefs: BeliefSet, agent: str) -> set[str]:
+    def in_hand(self, beliefs: BeliefSet, agent: str) -> set[str]:
         """The objects `agent` holds."""
         ...
 

@@ -13,7 +13,10 @@ from dataclasses import dataclass, field, replace
 
 from cbdi.beliefs import FUNCTION, Belief, BeliefSet, fact
 from cbdi.wire.agent import ActionStatus, ArrestReport, Claim, DesireEvent, PartialPlan
-from cbdi.wire.world import ActionOutcome, Percepts, Sensed
+from cbdi.wire.world import (
+    ActionOutcome,
+    Percept,
+)
 from cbdi_scheduler.agentfile import AgentFile
 from cbdi_scheduler.claims import Claims
 from cbdi_scheduler.desires import Desire, Drop, achieved, drops, joint, select_desire
@@ -74,7 +77,7 @@ class Mind:
             goal=[list(g.atom) for g in desire.goal],
         )
 
-    def on_percepts(self, p: Percepts | Sensed) -> Reaction:
+    def on_percepts(self, p: Percept) -> Reaction:
         """Run one BDI cycle on this epoch's percepts."""
         self.now, self.epoch = p.time, p.epoch
         before = self.beliefs
@@ -204,11 +207,11 @@ class Mind:
         if claims is None:
             return desires
         out = {}
-        holding = self._holding()
+        in_hand = self._in_hand()
         for name, d in desires.items():
             held = self.desires.get(name)
             old = set(held.goal) if held is not None else set()
-            goal = tuple(g for g in d.goal if g in old or self._takes(g, holding))
+            goal = tuple(g for g in d.goal if g in old or self._takes(g, in_hand))
             if held is not None and set(goal) == old:
                 out[name] = held  # what a boost brought was all others': nothing new
             elif goal:
@@ -305,28 +308,28 @@ class Mind:
         out.events.append(self.event(desire, "dropped", reason))
         self.refire = True
         if self.claims is not None:  # others may take up what we gave up (not held)
-            held = self._holding()
+            held = self._in_hand()
             out.claims += self.claims.release(
                 g.atom for g in desire.goal if self.claims.claimable(g.atom) not in held
             )
 
-    def _ours(self, atom: tuple[str, ...], holding: set[str]) -> bool:
+    def _ours(self, atom: tuple[str, ...], in_hand: set[str]) -> bool:
         """Return whether `atom`'s object is free or ours: an item in hand is always ours
         (we claim it as its holder), even if another agent's claim won it before."""
         assert self.claims is not None
-        return self.claims.foreign(atom) is None or self.claims.claimable(atom) in holding
+        return self.claims.foreign(atom) is None or self.claims.claimable(atom) in in_hand
 
-    def _takes(self, goal: Belief, holding: set[str]) -> bool:
+    def _takes(self, goal: Belief, in_hand: set[str]) -> bool:
         """Return whether a rule's new goal atom is ours to take up: its object is free
         or ours, and a shared goal is not already achieved (by us or, as the group told,
         by another agent)."""
         assert self.claims is not None
         if self.claims.claimable(goal.atom) is not None and self.beliefs.holds(goal):
             return False
-        return self._ours(goal.atom, holding)
+        return self._ours(goal.atom, in_hand)
 
-    def _holding(self) -> set[str]:
-        return self.knowledge.holding(self.beliefs, self.agent)
+    def _in_hand(self) -> set[str]:
+        return self.knowledge.in_hand(self.beliefs, self.agent)
 
     # -- claims in the group -------------------------------------------------------------
     def on_claim(self, claim: Claim) -> Reaction:
@@ -348,9 +351,9 @@ class Mind:
         claims = self.claims
         if claims is None:
             return
-        holding = self._holding()
+        in_hand = self._in_hand()
         for name, desire in list(self.desires.items()):
-            mine = [g for g in desire.goal if self._ours(g.atom, holding)]
+            mine = [g for g in desire.goal if self._ours(g.atom, in_hand)]
             # A claim ends when its goal atom is achieved: the item is free to be
             # claimed anew if the atom becomes false again (work that comes back).
             done = [g.atom for g in mine if self.beliefs.holds(g)]
@@ -359,7 +362,7 @@ class Mind:
                 (g.atom for g in mine if not self.beliefs.holds(g)),
                 self.epoch,
                 lambda item: self.knowledge.cost(self.beliefs, self.agent, item),
-                holding=holding,
+                in_hand=in_hand,
             )
             if len(mine) == len(desire.goal):
                 continue

@@ -21,6 +21,7 @@ from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.peers import Peers
+from cbdi.plugins import percept_types
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.view import world_info
@@ -37,7 +38,12 @@ from cbdi.wire.agent import (
 )
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchStatus
-from cbdi.wire.world import PERCEPTS, ActionOutcome, EpochAck, Percepts, Sensed, Tick
+from cbdi.wire.world import (
+    ActionOutcome,
+    EpochAck,
+    Percept,
+    Tick,
+)
 from cbdi_scheduler.asking import HeldAsks, ask_request, send_ask
 from cbdi_scheduler.intentions import Command
 from cbdi_scheduler.mind import Mind, Reaction
@@ -47,8 +53,7 @@ from cbdi_scheduler.state import PlanLog, agent_state
 __all__ = ["SchedulerService", "SchedulerSettings", "scheduler_main"]
 
 INPUTS: tuple[type[Message], ...] = (
-    Percepts,
-    Sensed,
+    *percept_types(),  # Sensed and the installed domains' own
     ActionOutcome,
     PartialPlan,
     SearchStatus,
@@ -112,7 +117,7 @@ class SchedulerService:
         ]
 
     async def load_map(self) -> None:
-        """Believe the world's map (cells, `near`, bins): the paper's `map_loaded`.
+        """Believe the world's map (its objects and facts): the paper's `map_loaded`.
 
         Waits for the world as long as it takes (saying so every `MAP_WAIT` s): an agent
         may start well before its world (another project, another machine), and one that
@@ -128,11 +133,12 @@ class SchedulerService:
                 waited += MAP_WAIT
                 why = str(exc) or "the world did not answer"
                 self.ctx.log.warning("waiting_for_world", waited=waited, error=why)
-        self.mind.beliefs = self.mind.beliefs.adding(self.mind.knowledge.map_beliefs(info))
+        known = self.mind.knowledge.map_beliefs(info)
+        self.mind.beliefs = self.mind.beliefs.adding(known)
         self.members = list(info.members)
         me = keys.member(self.agent, "scheduler")
         self.lockstep.lockstep_member = info.lockstep and me in info.members
-        self.ctx.log.info("map_loaded", map=info.map_name, cells=info.width * info.height)
+        self.ctx.log.info("map_loaded", map=info.map_name, beliefs=len(known))
 
     async def run(self, stream: AsyncIterator[Stamped], load_map: bool) -> None:
         """Handle every input: in arrival order (real time), or epoch by epoch (lockstep)."""
@@ -152,10 +158,10 @@ class SchedulerService:
         """React to one input and publish what follows (beliefs first after percepts)."""
         if isinstance(msg, EpochAck | Tick):
             return
-        if isinstance(msg, PERCEPTS):
+        if isinstance(msg, Percept):
             self.held.release(msg.epoch)
         reaction = self.react(msg)
-        if isinstance(msg, PERCEPTS):  # beliefs first: the planner plans from them
+        if isinstance(msg, Percept):  # beliefs first: the planner plans from them
             update = self.beliefs_out.update(self.mind.beliefs, msg.time, msg.epoch)
             await publish(self.ctx.bus, keys.scheduler_beliefs(self.agent), update, block=True)
         await self.act(reaction)
@@ -292,7 +298,7 @@ class SchedulerService:
 
     def react(self, msg: Message) -> Reaction:
         mind = self.mind
-        if isinstance(msg, PERCEPTS):
+        if isinstance(msg, Percept):
             return mind.on_percepts(msg)
         if isinstance(msg, ActionOutcome):
             return mind.on_outcome(msg)

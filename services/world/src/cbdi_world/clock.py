@@ -67,16 +67,10 @@ class ClockSimulator:
         return False
 
     def info(self) -> WorldInfo:
-        """No map: one cell, the agents, the epoch's length."""
+        """No map: the agents and the epoch's length."""
         return WorldInfo(
             map_name="clock",
-            width=1,
-            height=1,
-            walls=[],
-            bins=[],
             agents=list(self.agents),
-            detection_depth={},
-            capacity=0,
             epoch_duration=self.options.epoch_duration,
             durations={},
         )
@@ -98,7 +92,7 @@ class ClockSimulator:
 
     def _result(self) -> EpochResult:
         percepts = [Sensed(agent=a, epoch=self.epoch, time=self.time) for a in self.agents]
-        agents = [AgentView(name=a, cell=(0, 0), pose=(0.5, 0.5), holding=[]) for a in self.agents]
+        agents = [AgentView(name=a, cell=(0, 0), pose=(0.5, 0.5)) for a in self.agents]
         snapshot = WorldSnapshot(
             epoch=self.epoch, time=self.time, agents=agents, people=[], items=[], completed=[]
         )

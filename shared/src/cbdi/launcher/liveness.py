@@ -21,7 +21,7 @@ its restart sends more (32 robots on 2 cores: the world, killed this way, restar
 until the run failed). A loop whose own thread ran the limit's worth of CPU without a
 turn is held by code (frozen, whatever the load); a process neither running nor waiting
 for a CPU is asleep (a deadlock, a blocking call): frozen too. A process that sends
-nothing at all (stopped, or a thread holding the interpreter) is frozen. Evidence counts
+nothing at all (stopped, or a thread that keeps the interpreter) is frozen. Evidence counts
 only while fresh (heard within the limit): a stopped process's last word does not
 shield it.
 

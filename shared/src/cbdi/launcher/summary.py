@@ -216,6 +216,6 @@ async def collect_stats(bus: Bus, summary: RunSummary) -> None:
 
 
 def _agent_dict(a: Any) -> dict[str, int | float]:
-    """One agent's counters: the generic ones, the simulator's own (`counts`), busy time."""
-    generic = ("moves", "blocked", "failed", "rejected", "contacts")
-    return {**{k: getattr(a, k) for k in generic}, **a.counts, "busy": a.busy}
+    """One agent's counters: the simulator's own (`counts`: the grid's moves first), the
+    generic ones, busy time."""
+    return {**a.counts, "failed": a.failed, "rejected": a.rejected, "busy": a.busy}

@@ -75,9 +75,7 @@ async def _follow(ctx: ServiceContext, settings: WaitSettings, result: list[int]
         ctx.log.warning("no_stats", error=str(exc))
     else:
         per_agent = {
-            f"{a.agent}_{name}": count
-            for a in stats.agents
-            for name, count in {"moves": a.moves, **a.counts}.items()
+            f"{a.agent}_{name}": count for a in stats.agents for name, count in a.counts.items()
         }
         ctx.log.info("stats", done=stats.done, **stats.totals, **per_agent)
     ctx.stop(result[0])

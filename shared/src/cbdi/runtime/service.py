@@ -67,7 +67,7 @@ class ServiceSettings:
         default=1.0,
         metadata={
             "help": "wall seconds the event loop may stand before its log names the code "
-            "holding it (loop_stalled, loop_resumed; 0: not watched)"
+            "that keeps it (loop_stalled, loop_resumed; 0: not watched)"
         },
     )
     credentials: str = field(

@@ -166,7 +166,7 @@ def read_credentials(path: str | Path) -> Credentials:
         raise ConfigError(where, "credentials", "expected a JSON object")
     for name in ("user", "password"):
         if not isinstance(data.get(name), str) or not data[name] or ":" in data[name]:
-            raise ConfigError(where, name, "missing, empty, not a string or holding ':'")
+            raise ConfigError(where, name, "missing, empty, not a string or with a ':'")
     groups = data.get("groups", [])
     if not isinstance(groups, list) or not all(isinstance(g, str) for g in groups):
         raise ConfigError(where, "groups", "expected a list of group names")

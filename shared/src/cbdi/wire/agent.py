@@ -67,8 +67,8 @@ RequestOp = Literal[
     "halt",
     "resume",
 ]
-# A condition as agent files write it: clauses (any one holding will do) of literals
-# (all must hold), e.g. `[["(holding {self} pla61)"], ["(map_loaded)"]]`.
+# A condition as agent files write it: clauses (any one that holds will do) of literals
+# (all must hold), e.g. `[["(carrying {self} p1)"], ["(map_loaded)"]]`.
 Condition = Annotated[
     list[Annotated[list[Text], msgspec.Meta(max_length=100)]], msgspec.Meta(max_length=100)
 ]
@@ -205,7 +205,7 @@ class AgentRequest(Message, frozen=True, tag="cbdi.agent.AgentRequest/1"):
     `add_desire`, `del_desire`, or `halt` (a safe stop: the running step ends, nothing
     more starts, every desire is kept and its deadline waits) and `resume`; beliefs, goal
     literals and condition literals are written as in agent files (`(parcel_at p1 c_6_1)`,
-    `(= (battery robot1) 42.5)`, `(not (holding {self} *))`). An `event` is a predicate
+    `(= (battery robot1) 42.5)`, `(not (carrying {self} *))`). An `event` is a predicate
     atom the rules see in the next cycle only (`(bumped robot1)`): never a standing
     belief. `threshold`: an `add_belief` of a function value within this much of the
     believed value changes nothing (a sensor's noise). It is served only

@@ -28,20 +28,19 @@ from cbdi.wire.fields import (
 )
 
 __all__ = [
-    "PERCEPTS",
     "ActionOutcome",
     "ActionReply",
     "ActionRequest",
-    "AgentSeen",
     "AgentStats",
     "AgentView",
-    "BinView",
     "Cell",
     "ClockRequest",
     "EpochAck",
     "ItemView",
+    "MapLayer",
+    "MapView",
     "OutcomeStatus",
-    "Percepts",
+    "Percept",
     "PersonView",
     "Sensed",
     "StatsRequest",
@@ -118,44 +117,27 @@ class ItemView(Message, frozen=True, tag="cbdi.world.ItemView/1"):
     known: bool = True
 
 
-class AgentSeen(Message, frozen=True, tag="cbdi.world.AgentSeen/1"):
-    """Another agent standing on a cell of the sensed square."""
-
-    name: AgentName
-    cell: Cell
-
-
 # What the world had published on an agent's keys when it sent the agent's percepts (the
 # last of its epoch): the count of its outcomes key, cumulative (as `EpochAck.sent`). A
-# gate holding fewer waits for the rest: the bus may recover one key's samples later than
+# gate that has fewer waits for the rest: the bus may recover one key's samples later than
 # another's (after a router restart), so arrival order across keys proves nothing.
 WorldSent = Annotated[dict[Symbol, Count], msgspec.Meta(max_length=8)]
 
 
-class Percepts(Message, frozen=True, tag="cbdi.world.Percepts/1"):
-    """What one agent senses this epoch in the (2d+1)x(2d+1) square around it.
-
-    `free` cells are inside the map and hold no wall, bin, person or agent; `blocked` are
-    the other in-map cells of the square (the agent's own cell is reported as blocked by
-    itself only in `position`). `items` lists the items lying in the square, `holding`
-    those the agent carries, `others` the other agents standing in it (which of the
-    `blocked` cells they hold). `sent`: see `WorldSent` (the world service fills it in).
-    """
+class Percept(Message, frozen=True):
+    """What one agent senses in one epoch: the base of every message a world publishes
+    on an agent's percepts key, `Sensed` or a domain's own (registered in entry-point
+    group `cbdi.percepts`, `cbdi.plugins.percept_types`). The lockstep gates and the
+    services read only these fields; a domain's knowledge reads the rest. `sent`: see
+    `WorldSent` (the world service fills it in)."""
 
     agent: AgentName
     epoch: Count
     time: NonNegative
-    position: Cell
-    depth: Annotated[int, msgspec.Meta(ge=0, le=1000)]
-    free: Many[Cell]
-    blocked: Many[Cell]
-    items: Many[ItemView]
-    holding: Many[Symbol]
     sent: WorldSent = {}
-    others: Many[AgentSeen] = []
 
 
-class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
+class Sensed(Percept, frozen=True, tag="cbdi.world.Sensed/1"):
     """What one agent senses this epoch, as belief changes: any simulator's percepts.
 
     `instances` are objects first seen (name -> PDDL type), `add` the ground atoms sensed
@@ -164,27 +146,20 @@ class Sensed(Message, frozen=True, tag="cbdi.world.Sensed/1"):
     neither added nor deleted keeps what the agent believed. `sent`: see `WorldSent`.
     """
 
-    agent: AgentName
-    epoch: Count
-    time: NonNegative
     instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
     add: Many[Atom] = []
     delete: Many[Atom] = []
     fluents: Many[tuple[Atom, Finite]] = []
-    sent: WorldSent = {}
-
-
-# The percept messages a world publishes (a grid sensor's, any simulator's).
-PERCEPTS = (Percepts, Sensed)
 
 
 class AgentView(Message, frozen=True, tag="cbdi.world.AgentView/1"):
-    """One robot in a snapshot: logical cell, continuous pose, load and current action."""
+    """One robot in a snapshot: logical cell, continuous pose, what it carries (`load`:
+    the items it has taken off the map) and its current action."""
 
     name: AgentName
     cell: Cell
     pose: Pose
-    holding: Many[Symbol]
+    load: Many[Symbol] = []
     action: Id = ""
 
 
@@ -194,13 +169,6 @@ class PersonView(Message, frozen=True, tag="cbdi.world.PersonView/1"):
     name: Symbol
     cell: Cell
     pose: Pose
-
-
-class BinView(Message, frozen=True, tag="cbdi.world.BinView/1"):
-    """One bin."""
-
-    name: Symbol
-    cell: Cell
 
 
 class WorldSnapshot(Message, frozen=True, tag="cbdi.world.WorldSnapshot/1"):
@@ -225,18 +193,48 @@ class WorldInfoRequest(Message, frozen=True, tag="cbdi.world.WorldInfoRequest/1"
     """Ask for the static part of the world (map geometry)."""
 
 
-class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
-    """The static part of the world: size, walls, bins (fixed drop-off places), agents
-    and their sensing depth."""
+Colour = tuple[
+    Annotated[int, msgspec.Meta(ge=0, le=255)],
+    Annotated[int, msgspec.Meta(ge=0, le=255)],
+    Annotated[int, msgspec.Meta(ge=0, le=255)],
+]
 
-    map_name: Text
+
+class MapLayer(Message, frozen=True, tag="cbdi.world.MapLayer/1"):
+    """One static layer of a map as the views draw it: cells (walls, drop-off places,
+    chargers), each a box `size` cells wide in `colour` (rerun, at `world/map/<name>`)
+    and the character `glyph` (text), with a label per cell or none."""
+
+    name: Symbol
+    cells: Many[Cell]
+    labels: Many[Symbol] = []
+    glyph: Annotated[str, msgspec.Meta(pattern="^[!-~]$")] = "#"
+    colour: Colour = (60, 60, 60)
+    size: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 1.0
+
+
+class MapView(Message, frozen=True, tag="cbdi.world.MapView/1"):
+    """How the views draw a map that has a floor of cells: its size and static layers.
+    What the cells mean is the domain's (its knowledge reads `WorldInfo.map`)."""
+
     width: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
     height: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
-    walls: Many[Cell]
-    bins: Many[BinView]
+    layers: Annotated[list[MapLayer], msgspec.Meta(max_length=64)] = []
+
+
+# A domain's own map, encoded by its simulator: one message of the domain's own type (the
+# grid's `cbdi.recycling.GridMap/1`), which only the domain's code decodes.
+DomainMap = Annotated[bytes, msgspec.Meta(max_length=64 * 1024 * 1024)]
+
+
+class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
+    """The static part of the world, what every domain has: the agents, the epoch's
+    length, action durations, the static beliefs (`instances`, `facts`, `fluents`), how
+    views draw the map (`view`, if it has a floor of cells) and the domain's own map
+    (`map`, read only by the domain's code)."""
+
+    map_name: Text
     agents: Many[AgentName]
-    detection_depth: Annotated[dict[AgentName, Count], msgspec.Meta(max_length=10_000)]
-    capacity: Count
     epoch_duration: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
     durations: Annotated[dict[Symbol, NonNegative], msgspec.Meta(max_length=1000)]
     known_items: Many[ItemView] = []  # items agents know of at the start
@@ -244,13 +242,15 @@ class WorldInfo(Message, frozen=True, tag="cbdi.world.WorldInfo/1"):
     # waits for.
     members: Many[Symbol] = []
     lockstep: bool = False
-    actions: Many[Symbol] = []  # the PDDL actions the world performs (its binding's)
+    actions: Many[Symbol] = []  # the PDDL actions the world performs (its simulator's)
     # What the map tells every agent at the start (a simulator's static beliefs): objects
     # (name -> PDDL type), ground atoms and function values.
     instances: Annotated[dict[Symbol, Symbol], msgspec.Meta(max_length=MAX_ITEMS)] = {}
     facts: Many[Atom] = []
     fluents: Many[tuple[Atom, Finite]] = []
     simulator: Id = ""  # the simulator's name (entry point cbdi.simulators)
+    view: MapView | None = None
+    map: DomainMap = b""
 
 
 ACK_STAGES = ("ready", "beliefs", "done")
@@ -263,7 +263,7 @@ class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
     (the scheduler's first half: beliefs and commands out, the planner may start) or
     `ready` (epoch -1: alive, subscribed, waiting for epoch 0; the start barrier).
     `sent` is what the component had published by then, per key (cumulative counts, the
-    `seq` of its last message on that key): a receiver holding fewer of a key's messages
+    `seq` of its last message on that key): a receiver that has fewer of a key's messages
     waits for the rest, so nothing of epoch k arrives after the next epoch starts.
     """
 
@@ -275,15 +275,13 @@ class EpochAck(Message, frozen=True, tag="cbdi.world.EpochAck/1"):
 
 
 class AgentStats(Message, frozen=True, tag="cbdi.world.AgentStats/1"):
-    """Counters for one agent, the paper's metric (moves) first; a simulator's own
-    counters (pickups, deliveries, charges, ...) in `counts`, by name."""
+    """Counters for one agent: actions that failed and requests refused, time busy, and
+    the simulator's own counters in `counts`, by name (the grid's moves, blocked moves,
+    contacts, pickups and recycled items; courier's count of each action)."""
 
     agent: AgentName
-    moves: Count = 0
-    blocked: Count = 0
     failed: Count = 0
     rejected: Count = 0
-    contacts: Count = 0
     busy: NonNegative = 0.0  # simulated seconds in actions that ended (the rest is idle)
     counts: Annotated[dict[Symbol, Count], msgspec.Meta(max_length=256)] = {}
 

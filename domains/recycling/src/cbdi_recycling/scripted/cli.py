@@ -25,10 +25,10 @@ from cbdi.wire.world import (
     ActionReply,
     ActionRequest,
     EpochAck,
-    Percepts,
     WorldInfo,
 )
 from cbdi_recycling.scripted.policy import Beliefs, Step, greedy_step, parse_script
+from cbdi_recycling.wire import Percepts, grid_map
 
 __all__ = ["ScriptedSettings", "main"]
 
@@ -138,12 +138,13 @@ class ScriptedAgent:
 
 def beliefs_of(info: WorldInfo) -> Beliefs:
     """What the agent knows at the start: the world's static part and the known litter."""
+    grid = grid_map(info)
     return Beliefs(
-        width=info.width,
-        height=info.height,
-        walls=frozenset(info.walls),
-        bins=frozenset(b.cell for b in info.bins),
-        capacity=info.capacity,
+        width=grid.width,
+        height=grid.height,
+        walls=frozenset(grid.walls),
+        bins=frozenset(b.cell for b in grid.bins),
+        capacity=grid.capacity,
         litter={item.name: item.cell for item in info.known_items},
     )
 

@@ -12,7 +12,10 @@ from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from cbdi.wire.world import Cell, Percepts
+from cbdi.wire.world import (
+    Cell,
+)
+from cbdi_recycling.wire import Percepts
 
 __all__ = ["Beliefs", "Step", "greedy_step", "next_hop", "parse_script"]
 

@@ -6,7 +6,7 @@ away from the cells they stand on). The planner remembers every such fact it has
 believed. When a search fails, it asks whether the goal would be reachable in the
 relaxed planning graph (delete effects ignored, durative actions as their start and
 end) if those facts held again: if so, the failure is *blocked* (a person in a doorway,
-a robot parked next to the bin) and the scheduler waits for the obstacle to move;
+a robot parked at a door) and the scheduler waits for the obstacle to move;
 if not, no change of moving obstacles can help and the goal is unsolvable.
 
 The test is an over-approximation by design: a goal reported unsolvable is unsolvable
