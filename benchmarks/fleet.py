@@ -85,6 +85,10 @@ class FleetRun:
     # services restarted (a kill by the freeze watchdog on a machine short of CPU, a
     # crash): such a run is no longer a function of its inputs alone
     restarts: int = 0
+    # lockstep members the world stopped waiting for at the ack timeout (a late member's
+    # inputs go to a later epoch: the run then depends on the machine's load too)
+    stalls: int = 0
+    freezes: int = 0  # services the freeze watchdog judged frozen (reported or killed)
 
     @property
     def busy_fractions(self) -> list[float]:
@@ -194,6 +198,8 @@ def from_summary(
         trace_digest=summary.get("trace_digest", ""),
         reason=summary.get("reason", ""),
         restarts=sum(int(n) for n in summary.get("restarts", {}).values()),
+        stalls=sum(int(n) for n in summary.get("stalls", {}).values()),
+        freezes=sum(int(n) for n in summary.get("freezes", {}).values()),
     )
 
 
@@ -216,7 +222,8 @@ def read_csv(path: Path) -> list[FleetRun]:
             for name in ints:
                 values[name] = int(row[name])
             values["wall"] = float(row["wall"])
-            values["restarts"] = int(row.get("restarts") or 0)
+            for name in ("restarts", "stalls", "freezes"):  # absent from older files
+                values[name] = int(row.get(name) or 0)
             values["mission_time"] = float(row["mission_time"]) if row["mission_time"] else None
             out.append(FleetRun(**values))
     return out

@@ -66,6 +66,16 @@ def markdown(
             + ".",
             "",
         ]
+    stalled = [r for r in runs if r.stalls and not r.restarts]
+    if stalled:
+        out += [
+            f"**{len(stalled)} of {len(runs)} runs had lockstep members that missed the "
+            "ack timeout** (the world went on without them, so what they sent was taken "
+            "an epoch late and the run depends on the machine's load): "
+            + ", ".join(f"{r.scenario} x{r.agents} seed {r.seed}" for r in stalled)
+            + ".",
+            "",
+        ]
     for name in maps:
         out += [f"## {name}", ""]
         out.append(

@@ -123,6 +123,9 @@ def test_a_summary_gives_the_figures() -> None:
     assert late.mission_time is None and late.restarts == 0
     killed = {**summary, "restarts": {"world": 1, "robot2/planner": 2, "router": 0}}
     assert fleet.from_summary("m", 2, 1, 0, killed, 0, 1.0).restarts == 3
+    stalled = {**summary, "stalls": {"robot2/executor": 2}, "freezes": {"robot2/planner": 1}}
+    run = fleet.from_summary("m", 2, 1, 0, stalled, 0, 1.0)
+    assert (run.stalls, run.freezes, run.restarts) == (2, 1, 0)
 
 
 WAREHOUSE = "warehouse-15x15-bdi"
@@ -136,6 +139,8 @@ def test_the_table_and_figure_from_a_csv(tmp_path: Path) -> None:
         runs.append(fleet.FleetRun(WAREHOUSE, n, len(runs) + 1, "done", 0, t, *figures))
     late = (9, 7, 50, 60, 9, 0, "[0.5, 0.4]", 30.0, "d", "time", 2)
     runs.append(fleet.FleetRun(WAREHOUSE, 2, 9, "time_limit", 0, None, *late))
+    stalled = (9, 9, 60, 70, 9, 0, "[0.8, 0.7]", 30.0, "e", "", 0, 3, 1)
+    runs.append(fleet.FleetRun(WAREHOUSE, 2, 10, "done", 0, 125.0, *stalled))
     fleet.write_csv(runs, tmp_path / "fleet.csv")
     assert fleet.read_csv(tmp_path / "fleet.csv") == runs
     out = tmp_path / "out"
@@ -146,10 +151,11 @@ def test_the_table_and_figure_from_a_csv(tmp_path: Path) -> None:
     assert code == 0
     text = (out / "fleet.md").read_text()
     assert "| 1 | 2/2 | 250.0 ± 14.1" in text and "117.0 (work)" in text
-    assert "| 2 | 2/3 | 125.0" in text and "| 2.00 |" in text  # speed-up 250/125
+    assert "| 2 | 3/4 | 125.0" in text and "| 2.00 |" in text  # speed-up 250/125
     assert "| 16 | the map has fewer start cells" in text
     assert "N=2 seed 9: time_limit" in text and "Work shared" in text
-    assert "1 of 5 runs had services restarted" in text and "x2 seed 9" in text
+    assert "1 of 6 runs had services restarted" in text and "x2 seed 9" in text
+    assert "1 of 6 runs had lockstep members that missed" in text and "x2 seed 10" in text
     width, height = read_png(out / "fleet.png")[:2]
     assert width > 400 and height > 200
 
