@@ -23,6 +23,7 @@ from cbdi_planner.continual import (
     RoundDone,
     SearchFailed,
     SearchThread,
+    Sensed,
     commit,
     forecast,
 )
@@ -165,6 +166,87 @@ def test_commit_counts_started_steps_and_simulates_them(task: Task) -> None:
     robot_at = plan.actions[2].name.split()[-1]
     assert done.state is not None
     assert f"(in robot1 {robot_at})" in task.fact_names(done.state.facts)
+
+
+def _loaded(task: Task, state: State) -> float:
+    return state.nums[task.num_vars.index("(loaded_amount robot1)")]
+
+
+def _through(task: Task, steps: tuple[ScheduledAction, ...], last: int, part: str) -> State:
+    """The beliefs once steps 0..last-1 ended and step `last` started (`part`: "start")
+    or ended ("end"): what the world's percepts show then."""
+    state = initial_state(task)
+    for a in steps[:last]:
+        state = simulate_state(task, a, state, "end")
+    return simulate_state(task, steps[last], state, part)
+
+
+def simulate_state(task: Task, step: ScheduledAction, state: State, part: str) -> State:
+    (action,) = [a for a in task.actions if a.name == step.name]
+    facts, nums = action.start.apply(state.facts, state.nums)
+    if part == "end" and action.end is not None:
+        facts, nums = action.end.apply(facts, nums)
+    return State(facts, nums, state.open, state.til)
+
+
+def test_a_started_step_whose_end_the_beliefs_show_is_not_applied_again(task: Task) -> None:
+    """The executor's `running` can come after the percepts that show the step ended (in
+    lockstep the planner sees the executor's statuses an epoch late): a pickup's
+    `increase` must not count twice, or the next pickup is forecast to break the
+    capacity (a false failure and a needless repair)."""
+    plan = search(task).plan
+    assert plan is not None
+    steps = plan.actions
+    k = next(i for i, a in enumerate(steps) if a.name.startswith("litter_pickup"))
+    statuses = {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+    began = 10.0
+    ended = _through(task, steps, k, "end")  # the percepts at the pickup's end
+    beliefs = replace(task, init_facts=ended.facts, init_nums=ended.nums)
+    at_end = Sensed(began + (steps[k].duration or 0.0), {k: began})
+    done = commit(beliefs, steps, statuses, 1, at_end)
+    assert done.state is not None and _loaded(task, done.state) == _loaded(task, ended)
+    # Without the times (or before the end) the step is applied: counted twice.
+    twice = commit(beliefs, steps, statuses, 1)
+    assert twice.state is not None and _loaded(task, twice.state) == _loaded(task, ended) + 1
+
+
+def test_a_started_step_mid_way_gets_its_end_once_and_its_start_not_again(task: Task) -> None:
+    plan = search(task).plan
+    assert plan is not None
+    steps = plan.actions
+    k = next(i for i, a in enumerate(steps) if a.name.startswith("recycle"))
+    statuses = {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+    began = 20.0
+    started = _through(task, steps, k, "start")  # the recycle's `decrease` shows already
+    beliefs = replace(task, init_facts=started.facts, init_nums=started.nums)
+    mid = Sensed(began + 1.0, {k: began})
+    done = commit(beliefs, steps, statuses, 1, mid)
+    ended = _through(task, steps, k, "end")
+    assert done.state is not None
+    assert (done.state.facts, done.state.nums) == (ended.facts, ended.nums)
+    # Beliefs sensed before the start (the same time) show none of it: all applied.
+    before = _through(task, steps, k - 1, "end") if k else initial_state(task)
+    early = replace(task, init_facts=before.facts, init_nums=before.nums)
+    whole = commit(early, steps, statuses, 1, Sensed(began, {k: began}))
+    assert whole.state is not None
+    assert (whole.state.facts, whole.state.nums) == (ended.facts, ended.nums)
+
+
+def test_a_step_stretched_past_its_planned_end_is_still_running_in_the_forecast(
+    task: Task,
+) -> None:
+    """Past the planned end but without its end effects in the beliefs (the world
+    stretched it), the step has not ended: its end is applied, once."""
+    plan = search(task).plan
+    assert plan is not None
+    steps = plan.actions
+    k = next(i for i, a in enumerate(steps) if a.name.startswith("litter_pickup"))
+    statuses = {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+    started = _through(task, steps, k, "start")
+    beliefs = replace(task, init_facts=started.facts, init_nums=started.nums)
+    late = Sensed(10.0 + 2 * (steps[k].duration or 0.0), {k: 10.0})
+    done = commit(beliefs, steps, statuses, 1, late)
+    assert done.state is not None and _loaded(task, done.state) == _loaded(task, started) + 1
 
 
 # -- disjunctions: internal goal actions and actions split into copies -------------------

@@ -54,6 +54,7 @@ from cbdi_planner.continual import (
     RoundDone,
     SearchFailed,
     SearchThread,
+    Sensed,
     commit,
     forecast,
 )
@@ -291,7 +292,10 @@ class ContinualPlanner:
                 and status.plan_id == line.plan_id
                 and status.step_id in line.step_ids
             ):
-                line.statuses[line.step_ids.index(status.step_id)] = status.status
+                k = line.step_ids.index(status.step_id)
+                line.statuses[k] = status.status
+                if status.status == "running":
+                    line.began[k] = status.time  # the world's start time
 
     def on_beliefs(self, beliefs: BeliefSet, now: float) -> list[Message]:
         """New beliefs: forecast the executing plan's failure and act on it."""
@@ -317,6 +321,7 @@ class ContinualPlanner:
             line.statuses,
             min_commit_steps=self.settings.min_commit_steps,
             horizon=self.settings.forecast_horizon,
+            sensed=Sensed(self.now, line.began),
         )
         failed = line.step_ids[fc.failed] if fc.failed is not None else ""
         out: list[Message] = []
@@ -369,7 +374,9 @@ class ContinualPlanner:
         assert line is not None and req is not None
         if min_commit_steps is None:
             min_commit_steps = self.settings.min_commit_steps
-        done = commit(task, line.steps, line.statuses, min_commit_steps)
+        done = commit(
+            task, line.steps, line.statuses, min_commit_steps, Sensed(self.now, line.began)
+        )
         state: State | None = done.state
         if state is None:
             self.log("commit_failed", plan=line.plan_id, reason=done.reason)

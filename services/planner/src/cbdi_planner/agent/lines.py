@@ -45,6 +45,7 @@ class Line:
     steps: list[ScheduledAction] = field(default_factory=list)
     step_ids: list[str] = field(default_factory=list)
     statuses: dict[int, str] = field(default_factory=dict)
+    began: dict[int, float] = field(default_factory=dict)  # started steps' start times
     complete: bool = False
     improved: bool = False
 

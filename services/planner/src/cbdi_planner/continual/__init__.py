@@ -8,6 +8,7 @@ from cbdi_planner.continual.execution import (
     HOLDS,
     Commitment,
     Forecast,
+    Sensed,
     commit,
     forecast,
 )
@@ -43,6 +44,7 @@ __all__ = [
     "SearchFailed",
     "SearchSpace",
     "SearchThread",
+    "Sensed",
     "commit",
     "forecast",
     "segment",

@@ -5,6 +5,17 @@ From the executing plan and each step's status, `commit` finds the committed act
 are committed) and the committed state: the current beliefs with the committed actions
 simulated on them. `forecast` simulates the rest of the plan from there (or only its next
 `horizon` actions, the paper's proposed refinement) and classifies the outcome.
+
+A started step's effects are applied once: the beliefs may show some already, since the
+step's status (from the executor) can come after the percepts that show its start or even
+its end. Given when the beliefs were sensed and when each step began (`Sensed`), a
+started step whose start lies before the beliefs and whose start effects on facts all
+show in them has its start counted as shown, and one whose planned end also lies at or
+before the beliefs and whose end effects on facts all show has ended in them; a shown
+part's numeric effects (an `increase`, a `decrease`) are not applied again. Effects on
+facts are evidence; a part with none is judged by the time alone (an action stretched
+past its planned end then counts as ended early: its numeric end effect is missed, not
+doubled). Without `Sensed` every started step is applied whole, as before.
 """
 
 from __future__ import annotations
@@ -15,7 +26,7 @@ from dataclasses import dataclass
 from cbdi_planner.plan import Plan, ScheduledAction
 from cbdi_planner.simulate import simulate
 from cbdi_planner.state import State
-from cbdi_planner.task import GroundAction, Task, holds
+from cbdi_planner.task import GroundAction, Snap, Task, holds
 
 __all__ = [
     "COMMITTED_FAILS",
@@ -23,6 +34,7 @@ __all__ = [
     "HOLDS",
     "Commitment",
     "Forecast",
+    "Sensed",
     "commit",
     "forecast",
 ]
@@ -33,6 +45,16 @@ HOLDS = "holds"  # start the improver
 
 DONE = ("succeeded",)
 STARTED = ("running", "succeeded")
+EPS = 1e-6  # simulated seconds: times this close are the same time
+
+
+@dataclass(frozen=True, slots=True)
+class Sensed:
+    """When the beliefs were sensed (`now`) and when each started step began (its index
+    in the plan -> the world's start time, from the executor's `running` status)."""
+
+    now: float
+    began: Mapping[int, float]
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,9 +78,11 @@ class Forecast:
     commitment: Commitment
 
 
-def _force(task: Task, state: State, name: str) -> State | None:
+def _force(
+    task: Task, state: State, step: ScheduledAction, began: float | None, now: float | None
+) -> State | None:
     """Apply an already started action's effects (the world decided it could start; the
-    beliefs may already show part of its effects); None if no copy of it fits.
+    beliefs may already show part of its effects: `_shown`); None if no copy of it fits.
 
     A name split into copies, one per disjunct of its conditions, means the copy that
     applies in `state`: its start condition holds and, for a durative one, its invariant
@@ -67,7 +91,7 @@ def _force(task: Task, state: State, name: str) -> State | None:
     for the facts its start changes (beliefs that already show them). A lone copy is
     forced unchecked.
     """
-    copies = [a for a in task.actions if a.name == name and not a.internal]
+    copies = [a for a in task.actions if a.name == step.name and not a.internal]
     if len(copies) > 1:
         copies = [a for a in copies if _fits(a, state, False)] or [
             a for a in copies if _fits(a, state, True)
@@ -75,10 +99,36 @@ def _force(task: Task, state: State, name: str) -> State | None:
     if not copies:
         return None
     action = copies[0]
-    facts, nums = action.start.apply(state.facts, state.nums)
+    start, end = _shown(action, state.facts, step.duration or 0.0, began, now)
+    if end:
+        return state  # it ended in the beliefs: all of it shows
+    if start:  # its facts again (no change), its numbers not
+        facts, nums = (state.facts & ~action.start.dele) | action.start.add, state.nums
+    else:
+        facts, nums = action.start.apply(state.facts, state.nums)
     if action.end is not None:
         facts, nums = action.end.apply(facts, nums)
     return State(facts, nums, state.open, state.til)
+
+
+def _shown(
+    action: GroundAction, facts: int, duration: float, began: float | None, now: float | None
+) -> tuple[bool, bool]:
+    """Whether beliefs sensed at `now` (`facts`) show the start and the end of `action`,
+    which began at `began` (unknown: None, neither shows)."""
+    if began is None or now is None or now <= began + EPS:
+        return False, False
+    start = _shows(action.start, facts)
+    if action.end is None:
+        return start, start
+    end = start and now >= began + duration - EPS and _shows(action.end, facts)
+    return start, end
+
+
+def _shows(snap: Snap, facts: int) -> bool:
+    """Whether `facts` show a happening's unconditional effects on facts (True if it has
+    none: then only the time tells)."""
+    return (snap.add & ~facts) == 0 and (snap.dele & ~snap.add & facts) == 0
 
 
 def _fits(action: GroundAction, state: State, started: bool) -> bool:
@@ -102,10 +152,12 @@ def commit(
     steps: Sequence[ScheduledAction],
     statuses: Mapping[int, str],
     min_commit_steps: int = 1,
+    sensed: Sensed | None = None,
 ) -> Commitment:
     """Return the commitment of the plan `steps` (in order) given each step's status.
 
-    `task`'s initial state is the current beliefs, which include every finished step.
+    `task`'s initial state is the current beliefs, which include every finished step
+    (and, told by `sensed`, what of the started ones they show).
     """
     finished = 0
     while finished < len(steps) and statuses.get(finished) in DONE:
@@ -117,7 +169,9 @@ def commit(
     state = State(task.init_facts, task.init_nums)
     for k in range(finished, count):
         if statuses.get(k) in STARTED:
-            forced = _force(task, state, steps[k].name)
+            began = sensed.began.get(k) if sensed is not None else None
+            now = sensed.now if sensed is not None else None
+            forced = _force(task, state, steps[k], began, now)
             if forced is None:
                 return Commitment(count, finished, None, f"({steps[k].name}) is not applicable")
             state = forced
@@ -136,13 +190,14 @@ def forecast(
     *,
     min_commit_steps: int = 1,
     horizon: int = 0,
+    sensed: Sensed | None = None,
 ) -> Forecast:
     """Simulate the plan's unfinished steps from the current beliefs (`task`'s initial
     state) and classify: fails in the committed part, fails after it, or holds.
 
     `horizon` > 0 simulates only that many steps after the committed ones.
     """
-    done = commit(task, steps, statuses, min_commit_steps)
+    done = commit(task, steps, statuses, min_commit_steps, sensed)
     if done.state is None:
         return Forecast(COMMITTED_FAILS, None, done.reason, done)
     rest = steps[done.count :]
