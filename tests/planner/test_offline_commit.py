@@ -10,6 +10,7 @@ robot1 c_7_2) does not hold"), four times in a row once, and the desire was drop
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 
 from msgspec.structs import replace
 from test_bad_input import AGENT_FILE, alone
@@ -141,3 +142,26 @@ async def test_a_revised_search_follows_the_running_step() -> None:
         assert again.steps[0].start >= one.start + one.duration
         first_move = again.steps[0]
         assert first_move.action == "move" and first_move.args[1] == "c_2_0", first_move
+
+
+def test_a_running_pickup_the_beliefs_show_ended_is_committed_as_ended() -> None:
+    """The executor's `running` can come after the percepts that show the step ended
+    (the item in hand, gone from the floor: the pickup no longer grounds). Given the
+    beliefs' time, past its end, the plan follows it from the beliefs as they are."""
+    e = Execution()
+    e.follow(0, [PlanStep(step_id="p-1", action="litter_pickup", args=["robot1", "p2", "c_3_0"],
+                          start=5.0, duration=3.0)])  # fmt: skip
+    e.on_status(replace(status(1, "running"), action="litter_pickup"))
+    b = beliefs(robot="c_3_0")
+    ended = dataclasses.replace(
+        b,
+        facts=(b.facts - {("litter_pose", "p2", "c_3_0")}) | {("holding", "robot1", "p2")},
+        fluents={**b.fluents, ("loaded_amount", "robot1"): 1.0},
+    )
+    c = e.commit(DOMAIN, ended, GOAL, 8.0)
+    assert (c.count, c.after, c.ends) == (1, "p-1", 8.0)
+    (value,) = [v for h, v in c.problem.init_numeric.items() if h.name == "loaded_amount"]
+    assert value == 1.0  # not counted again
+    # Before its planned end it cannot be simulated: the beliefs as they are, unfollowed.
+    assert e.commit(DOMAIN, ended, GOAL, 7.0).count == 0
+    assert e.commit(DOMAIN, ended, GOAL).count == 0

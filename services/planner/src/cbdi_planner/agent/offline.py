@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from cbdi.beliefs import BeliefSet
 from cbdi.wire.agent import ActionStatus, PlanStep
 from cbdi_planner.agent.problem import problem_from_beliefs
-from cbdi_planner.continual import commit
+from cbdi_planner.continual import Sensed, commit
 from cbdi_planner.continual.execution import DONE, STARTED
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl.ast import Domain, Problem
@@ -52,30 +52,43 @@ class Execution:
     steps: list[ScheduledAction] = field(default_factory=list)
     ids: list[str] = field(default_factory=list)
     statuses: dict[int, str] = field(default_factory=dict)
+    began: dict[int, float] = field(default_factory=dict)  # started steps' start times
 
     def copy(self) -> Execution:
         """This execution as it is now (for a search's thread)."""
-        return Execution(list(self.steps), list(self.ids), dict(self.statuses))
+        return Execution(list(self.steps), list(self.ids), dict(self.statuses), dict(self.began))
 
     def on_status(self, status: ActionStatus) -> None:
         """Record a step's status (steps of plans no longer executing are ignored)."""
         if status.step_id in self.ids:
-            self.statuses[self.ids.index(status.step_id)] = status.status
+            k = self.ids.index(status.step_id)
+            self.statuses[k] = status.status
+            if status.status == "running":
+                self.began[k] = status.time  # the world's start time
 
     def follow(self, kept: int, steps: Sequence[PlanStep]) -> None:
         """A plan went out that follows the first `kept` steps: they stay, then it."""
         self.steps = self.steps[:kept]
         self.ids = self.ids[:kept]
         self.statuses = {k: s for k, s in self.statuses.items() if k < kept}
+        self.began = {k: t for k, t in self.began.items() if k < kept}
         for s in sorted(steps, key=lambda st: st.start):
             name = " ".join([s.action, *s.args])
             self.steps.append(ScheduledAction(s.start, name, s.duration or None))
             self.ids.append(s.step_id)
 
-    def commit(self, domain: Domain, beliefs: BeliefSet, goal: list[list[str]]) -> Committed:
+    def commit(
+        self,
+        domain: Domain,
+        beliefs: BeliefSet,
+        goal: list[list[str]],
+        sensed_at: float | None = None,
+    ) -> Committed:
         """The problem of reaching `goal` from the committed state: `beliefs` with the
-        started steps' effects applied. With nothing started, or started steps that
-        cannot be simulated from these beliefs, the beliefs as they are."""
+        started steps' effects applied, once (`sensed_at`: the beliefs' time, which
+        tells what of a started step they show already: `continual.execution`). With
+        nothing started, or started steps that cannot be simulated from these beliefs,
+        the beliefs as they are."""
         problem = problem_from_beliefs(domain, beliefs, goal)
         as_is = Committed(problem, 0, "", 0.0)
         if not any(self.statuses.get(k) == "running" for k in range(len(self.steps))):
@@ -83,7 +96,8 @@ class Execution:
         task = ground(domain, problem)
         finished = _leading(self.statuses, DONE)
         started = _leading(self.statuses, STARTED)
-        done = commit(task, self.steps, self.statuses, started - finished)
+        sensed = Sensed(sensed_at, self.began) if sensed_at is not None else None
+        done = commit(task, self.steps, self.statuses, started - finished, sensed)
         if done.state is None or done.count == 0:
             return as_is
         changing = set(task.facts)

@@ -220,7 +220,9 @@ class OfflinePlannerService(Epochs):
         its search plans from, made in the search's thread (grounding takes a while):
         its own PDDL problem, or the beliefs and its goal from the committed state
         (what the steps running now leave, `Execution.commit`)."""
+        now: float | None = self.now  # the beliefs' time (a problem's own has none)
         if req.problem:
+            now = None
             parsed = parse_problem(req.problem, self.domain, f"request {req.request_id}")
             goal = [list(g) for g in req.goal] or goal_of(parsed)
             self.beliefs, self.has_beliefs = beliefs_from_problem(parsed), True
@@ -231,7 +233,7 @@ class OfflinePlannerService(Epochs):
             return req, lambda: Committed(problem, 0, "", 0.0)
         execution, beliefs = self.execution.copy(), self.beliefs
         goal = [list(g) for g in req.goal]
-        return req, lambda: execution.commit(self.domain, beliefs, goal)
+        return req, lambda: execution.commit(self.domain, beliefs, goal, now)
 
     async def search(self, req: SearchRequest, basis: Basis) -> None:
         """Plan with the backend from `basis`; publish the plan and the outcome."""

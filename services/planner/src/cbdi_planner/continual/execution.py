@@ -15,7 +15,9 @@ before the beliefs and whose end effects on facts all show has ended in them; a 
 part's numeric effects (an `increase`, a `decrease`) are not applied again. Effects on
 facts are evidence; a part with none is judged by the time alone (an action stretched
 past its planned end then counts as ended early: its numeric end effect is missed, not
-doubled). Without `Sensed` every started step is applied whole, as before.
+doubled). A started step that no longer grounds from the beliefs (what it needed is gone,
+as an item it picked up) has ended in them once its planned end lies before them. Without
+`Sensed` every started step is applied whole, as before.
 """
 
 from __future__ import annotations
@@ -97,7 +99,10 @@ def _force(
             a for a in copies if _fits(a, state, True)
         ]
     if not copies:
-        return None
+        # Nothing of it grounds from these beliefs (what it needed is gone: an item it
+        # picked up): past its planned end it ended in them, else it cannot be simulated.
+        over = began is not None and now is not None and now >= began + (step.duration or 0.0)
+        return state if over else None
     action = copies[0]
     start, end = _shown(action, state.facts, step.duration or 0.0, began, now)
     if end:
