@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from cbdi_planner.stn import END, INST, START, TIL
-from cbdi_planner.task import NExpr, NumAssign, NumCond, Task
+from cbdi_planner.task import GroundAction, NExpr, NumAssign, NumCond, Task
 from cbdi_planner.task import bit_positions as _bits
 
 __all__ = ["RelaxedOp", "may_hold", "relaxed_ops", "widen"]
@@ -93,60 +93,66 @@ def relaxed_ops(
     ops: list[RelaxedOp] = []
     then: dict[int, int] = {}
     for a in task.actions:
-        start = a.start
-        cond_add = 0
-        for ce in start.cond_effects:
-            cond_add |= ce.add
-        if a.end is None:
-            ops.append(
-                RelaxedOp(
-                    INST,
-                    a.index,
-                    _bits(start.pre),
-                    _bits(start.add | cond_add),
-                    start.num_pre,
-                    start.num_eff,
-                )
-            )
-            continue
-        end_add = a.end.add
-        for ce in a.end.cond_effects:
-            end_add |= ce.add
-        if compress:
-            ops.append(
-                RelaxedOp(
-                    START,
-                    a.index,
-                    _bits(start.pre | ((a.inv | a.end.pre) & ~start.add)),
-                    _bits(start.add | cond_add | end_add),
-                    start.num_pre + a.end.num_pre + a.inv_num,
-                    start.num_eff + a.end.num_eff,
-                )
-            )
-            continue
-        pre = start.pre | (a.inv & ~start.add)
-        if not (a.end.pre | a.inv) & ~(pre | start.add):
+        mine, chained = _action_ops(a, compress, pending, ended)
+        if chained:
             then[len(ops)] = len(ops) + 1
-        ops.append(
-            RelaxedOp(
-                START,
-                a.index,
-                _bits(pre),
-                (*_bits(start.add | cond_add), pending + a.index),
-                start.num_pre,
-                start.num_eff,
-            )
-        )
-        ops.append(
-            RelaxedOp(
-                END,
-                a.index,
-                (*_bits(a.end.pre | a.inv), pending + a.index),
-                (*_bits(end_add), ended + a.index),
-                a.end.num_pre + a.inv_num,
-                a.end.num_eff,
-            )
-        )
+        ops += mine
     for i, til in enumerate(task.tils):
         ops.append(RelaxedOp(TIL, i, (), _bits(til.add), (), ()))
     return ops, then
+
+
+def _action_ops(
+    a: GroundAction, compress: bool, pending: int, ended: int
+) -> tuple[list[RelaxedOp], bool]:
+    """Return the relaxed operators of action `a` (`relaxed_ops`), and whether its end op
+    is chained to its start (enabled by the start alone)."""
+    start = a.start
+    cond_add = 0
+    for ce in start.cond_effects:
+        cond_add |= ce.add
+    if a.end is None:
+        return [
+            RelaxedOp(
+                INST,
+                a.index,
+                _bits(start.pre),
+                _bits(start.add | cond_add),
+                start.num_pre,
+                start.num_eff,
+            )
+        ], False
+    end_add = a.end.add
+    for ce in a.end.cond_effects:
+        end_add |= ce.add
+    if compress:
+        return [
+            RelaxedOp(
+                START,
+                a.index,
+                _bits(start.pre | ((a.inv | a.end.pre) & ~start.add)),
+                _bits(start.add | cond_add | end_add),
+                start.num_pre + a.end.num_pre + a.inv_num,
+                start.num_eff + a.end.num_eff,
+            )
+        ], False
+    pre = start.pre | (a.inv & ~start.add)
+    chained = not (a.end.pre | a.inv) & ~(pre | start.add)
+    return [
+        RelaxedOp(
+            START,
+            a.index,
+            _bits(pre),
+            (*_bits(start.add | cond_add), pending + a.index),
+            start.num_pre,
+            start.num_eff,
+        ),
+        RelaxedOp(
+            END,
+            a.index,
+            (*_bits(a.end.pre | a.inv), pending + a.index),
+            (*_bits(end_add), ended + a.index),
+            a.end.num_pre + a.inv_num,
+            a.end.num_eff,
+        ),
+    ], chained

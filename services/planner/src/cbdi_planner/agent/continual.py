@@ -28,7 +28,6 @@ from cbdi_planner.agent.lines import (
     Line,
     Search,
     extend,
-    failure_status,
     forecast_report,
     plan_prefix,
     round_report,
@@ -326,23 +325,11 @@ class ContinualPlanner(AgentTasks):
         """Turn a round's events into messages; drop a search replaced meanwhile."""
         if search is not self.search:
             return []
+        outdated = self._outdated(search, events)
+        if outdated is not None:
+            return outdated
         out: list[Message] = []
         better: ImprovedPlan | None = None
-        if search.repairs is not None:
-            old = search.repairs
-            started = sum(1 for s in old.statuses.values() if s in ("running", "succeeded"))
-            if started > search.thread.prefix:
-                # Alg. 2 line 9: execution committed past this search's prefix.
-                self.log("outdated", plan=search.line.plan_id, purpose=search.purpose)
-                self.search, self.repair_trigger = None, ""
-                self.last_forecast = ("", "", "")
-                rounds: list[Message] = [
-                    self._round(search, e) for e in events if isinstance(e, RoundDone)
-                ]
-                if search.purpose == "new":
-                    # A new plan must come: search again after what runs now.
-                    return rounds + self._again_from_committed(search, 0)
-                return rounds
         for event in events:
             if isinstance(event, RoundDone):
                 out.append(self._round(search, event))
@@ -384,6 +371,25 @@ class ContinualPlanner(AgentTasks):
             self.search = None
         return out
 
+    def _outdated(self, search: Search, events: list[Event]) -> list[Message] | None:
+        """Drop `search` if execution committed past its prefix (Alg. 2 line 9): its
+        rounds' reports, and a new plan's search again after what runs now. None: it
+        is not outdated."""
+        if search.repairs is None:
+            return None
+        old = search.repairs
+        started = sum(1 for s in old.statuses.values() if s in ("running", "succeeded"))
+        if started <= search.thread.prefix:
+            return None
+        self.log("outdated", plan=search.line.plan_id, purpose=search.purpose)
+        self.search, self.repair_trigger = None, ""
+        self.last_forecast = ("", "", "")
+        rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
+        if search.purpose == "new":
+            # A new plan must come: search again after what runs now.
+            return rounds + self._again_from_committed(search, 0)
+        return rounds
+
     def _again_from_committed(
         self, search: Search, min_commit_steps: int, mode: str = G
     ) -> list[Message]:
@@ -409,14 +415,6 @@ class ContinualPlanner(AgentTasks):
             return []  # the executing plan goes on; execution reports if it fails
         goal = self.request.goal if self.request is not None else []
         return [self._failure(search.request_id, reason, goal, search.blocked)]
-
-    def _failure(
-        self, request_id: str, reason: str, goal: list[list[str]], blocked: bool | None = None
-    ) -> SearchStatus:
-        """A failed search, `blocked` if the goal is reachable once moving things move."""
-        if blocked is None:
-            blocked = self._blocked(goal)
-        return failure_status(self.agent, request_id, reason, blocked)
 
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line

@@ -1,7 +1,7 @@
 """The planning tasks of one agent's planner: from its beliefs and its request's goal,
 or from a request's own PDDL problem; grounded once (`Groundings`), ahead of time in a
 worker thread (`warm`), and whether a goal out of reach is only blocked by things that
-move. `ContinualPlanner` plans with them.
+move (a failed search says so). `ContinualPlanner` plans with them.
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from msgspec.structs import replace
 
 from cbdi.agentfile import PlanningSettings
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.planner import SearchRequest
+from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
+from cbdi_planner.agent.lines import failure_status
 from cbdi_planner.agent.problem import (
     GoalError,
     beliefs_from_problem,
@@ -37,6 +38,7 @@ class AgentTasks:
     """What an agent's planner plans from: its beliefs, its request, the epoch grid
     (`ContinualPlanner` sets these; this part reads them)."""
 
+    agent: str
     domain: Domain
     settings: PlanningSettings
     grid: float
@@ -141,3 +143,11 @@ class AgentTasks:
         if known is not None:
             return known
         return self.transients.blocked(self.domain, self.beliefs, goal)
+
+    def _failure(
+        self, request_id: str, reason: str, goal: list[list[str]], blocked: bool | None = None
+    ) -> SearchStatus:
+        """A failed search, `blocked` if the goal is reachable once moving things move."""
+        if blocked is None:
+            blocked = self._blocked(goal)
+        return failure_status(self.agent, request_id, reason, blocked)
