@@ -92,8 +92,8 @@ def test_literals_split_at_the_top_level_and_bad_ones_say_why() -> None:
 
 
 def test_ctl_tells_an_event_as_an_event_request() -> None:
-    from cbdi.ctl import _parser, build_request
+    from cbdi.ctl_args import build_request, parser
 
-    args = _parser().parse_args(["belief", "event", "robot1", "(bumped robot1)"])
+    args = parser().parse_args(["belief", "event", "robot1", "(bumped robot1)"])
     req = build_request(args)
     assert (req.op, req.belief, req.group) == ("event", "(bumped robot1)", "operator")

@@ -222,3 +222,37 @@ def test_a_freeze_report_needs_finite_non_negative_times() -> None:
         raw = msgpack.packb({**msgpack.unpackb(encode(ok)), "silent_for": bad})
         with pytest.raises(WireError):
             decode(raw, ServiceFrozen)
+
+
+def test_a_graph_view_refuses_places_off_the_map_twice_named_and_links_to_nowhere() -> None:
+    """A map's places and links are checked when decoded: every place within the
+    view's size, at finite coordinates, named once; a link joins two of them."""
+    from cbdi.wire.world import MapLink, MapPlace, MapView
+
+    def raw(places: list[tuple[str, float, float]], links: list[tuple[str, str]]) -> bytes:
+        return msgpack.packb(
+            {
+                "schema": "cbdi.world.MapView/1",
+                "width": 4,
+                "height": 2,
+                "places": [{"schema": "cbdi.world.MapPlace/1", "name": n, "at": [x, y]}
+                           for n, x, y in places],
+                "links": [{"schema": "cbdi.world.MapLink/1", "a": a, "b": b} for a, b in links],
+            }
+        )  # fmt: skip
+
+    good = decode(raw([("shed", 0.5, 0.5), ("pond", 3.5, 1.5)], [("shed", "pond")]), MapView)
+    assert good.places[1] == MapPlace(name="pond", at=(3.5, 1.5))
+    assert good.links == [MapLink(a="shed", b="pond")]
+    for places, links, why in [
+        ([("shed", 4.5, 0.5)], [], "off the map"),
+        ([("shed", float("nan"), 0.5)], [], r"\$\.places\[0\]\.at"),
+        ([("shed", 0.5, 0.5), ("shed", 1.5, 0.5)], [], "appears twice"),
+        ([("", 0.5, 0.5)], [], r"\$\.places\[0\]\.name"),
+        ([("shed", 0.5, 0.5)], [("shed", "pond")], "does not join two places"),
+        ([("shed", 0.5, 0.5)], [("shed", "shed")], "does not join two places"),
+    ]:
+        with pytest.raises(WireError, match=why):
+            decode(raw(places, links), MapView)
+    with pytest.raises(ValueError, match="off the map"):
+        MapView(width=1, height=1, places=[MapPlace(name="far", at=(2.0, 0.5))])

@@ -24,7 +24,7 @@ from cbdi.runtime import ServiceSettings, load_config
 from cbdi.security.login import config_as
 from cbdi.security.policy import VIEWER
 from cbdi.wire.agent import DesireEvent
-from cbdi.wire.world import WorldInfo, WorldInfoRequest, WorldSnapshot
+from cbdi.wire.world import MapView, WorldInfo, WorldInfoRequest, WorldSnapshot
 
 __all__ = ["Intentions", "follow_text", "main", "render", "text_view"]
 
@@ -33,13 +33,16 @@ _AGENT_MARKS = string.digits[1:] + string.ascii_uppercase
 
 def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | None = None) -> str:
     """Draw the map: its static layers (`WorldInfo.view`: `#` walls and whatever glyph
-    each of the domain's layers has), `@` person (a moving obstacle), `*` an item known
-    from the start, `+` one found, 1-9/A-Z robots; then what each agent intends
-    (`intents`: agent -> text), if known. A map without a view is drawn as big as the
-    cells the snapshot holds."""
+    each of the domain's layers has), a graph's links as lines (`- | / \\`) and places
+    (`o`, or their own glyph), `@` person (a moving obstacle), `*` an item known from
+    the start, `+` one found, 1-9/A-Z robots; then the graph's places and links by name,
+    and what each agent intends (`intents`: agent -> text), if known. A map without a
+    view is drawn as big as the cells the snapshot holds."""
     width, height = _extent(info, snap)
     grid = [["." for _ in range(width)] for _ in range(height)]
-    for layer in info.view.layers if info.view else []:
+    if info.view is not None:
+        _draw_graph(grid, info.view)
+    for layer in info.view.layers if info.view else []:  # over the graph: walls hide it
         for x, y in layer.cells:
             _mark(grid, (x, y), layer.glyph)
     for item in snap.items:
@@ -58,8 +61,45 @@ def render(info: WorldInfo, snap: WorldSnapshot, intents: Mapping[str, str] | No
         f"  completed {len(snap.completed)}"
     )
     rows = [" ".join(row) for row in grid]
+    graph = _graph_legend(info.view) if info.view is not None else []
     intending = [f"{a}: {text}" for a, text in sorted((intents or {}).items())]
-    return "\n".join([header, *rows, "  ".join(legend), *intending])
+    return "\n".join([header, *rows, "  ".join(legend), *graph, *intending])
+
+
+# A graph of more places than this is drawn, not listed (a courier floor's every cell).
+_LISTED_PLACES = 24
+
+
+def _graph_legend(view: MapView) -> list[str]:
+    """Name a small graph's places (where each is drawn) and links; count a big one's."""
+    if not view.places:
+        return []
+    if len(view.places) > _LISTED_PLACES:
+        return [f"graph: {len(view.places)} places, {len(view.links)} links"]
+    places = "  ".join(f"{p.name} {int(p.at[0])},{int(p.at[1])}" for p in view.places)
+    links = "  ".join(f"{link.a}-{link.b}" for link in view.links)
+    return [f"places: {places}", *([f"links: {links}"] if links else [])]
+
+
+def _draw_graph(grid: list[list[str]], view: MapView) -> None:
+    """Draw each link as a line over the floor between its places, then the places."""
+    at = {p.name: (int(p.at[0]), int(p.at[1])) for p in view.places}
+    for link in view.links:
+        (x0, y0), (x1, y1) = at[link.a], at[link.b]
+        dx, dy = x1 - x0, y1 - y0
+        glyph = "|" if dx == 0 else "-" if dy == 0 else "\\" if (dx > 0) == (dy > 0) else "/"
+        steps = max(abs(dx), abs(dy))
+        for i in range(1, steps):  # the cells strictly between the two places
+            cell = (x0 + round(i * dx / steps), y0 + round(i * dy / steps))
+            if _at(grid, cell) == ".":
+                _mark(grid, cell, glyph)
+    for p in view.places:
+        _mark(grid, at[p.name], p.glyph)
+
+
+def _at(grid: list[list[str]], cell: tuple[int, int]) -> str:
+    x, y = cell
+    return grid[y][x] if 0 <= y < len(grid) and 0 <= x < len(grid[y]) else ""
 
 
 def _extent(info: WorldInfo, snap: WorldSnapshot) -> tuple[int, int]:

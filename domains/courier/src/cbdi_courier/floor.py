@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from cbdi.errors import ConfigError
-from cbdi.wire.world import MapLayer, MapView
+from cbdi.wire.world import MapLayer, MapLink, MapPlace, MapView
 
 __all__ = ["Cart", "Floor", "Parcel", "cell_name", "load_floor"]
 
@@ -86,12 +86,24 @@ class Floor:
         return 0 <= c[0] < self.width and 0 <= c[1] < self.height and c not in self.walls
 
     def view(self) -> MapView:
-        """How the views draw the floor: walls (`#`) and docks (`D`)."""
+        """How the views draw the floor: walls (`#`) and docks (`D`), and the graph the
+        PDDL map is, every floor cell a place (`c_X_Y` at its centre, drawn as floor in
+        text) linked to its floor neighbours (the `link` facts, each pair once)."""
         walls = MapLayer(name="walls", cells=sorted(self.walls))
         docks = MapLayer(
             name="docks", cells=sorted(self.docks), glyph="D", colour=(60, 90, 200), size=0.8
         )
-        return MapView(width=self.width, height=self.height, layers=[walls, docks])
+        cells = [(x, y) for y in range(self.height) for x in range(self.width)]
+        cells = [c for c in cells if self.floor_cell(c)]
+        places = [
+            MapPlace(name=cell_name(c), at=(c[0] + 0.5, c[1] + 0.5), glyph=".") for c in cells
+        ]
+        links = [
+            MapLink(a=cell_name(c), b=cell_name(n)) for c in cells for n in self.links(c) if c < n
+        ]
+        return MapView(
+            width=self.width, height=self.height, layers=[walls, docks], places=places, links=links
+        )
 
     def links(self, c: Cell) -> list[Cell]:
         x, y = c

@@ -3,7 +3,8 @@
 Entity layout (what a user sees in the viewer):
 
 - `world/map/floor` and `world/map/<layer>` (static boxes: the layers of the map's
-  `WorldInfo.view`, e.g. walls and bins), `world/people`, `world/items`
+  `WorldInfo.view`, e.g. walls and bins), `world/graph/links` and `world/graph/places` (a
+  graph's links, lines, and places, labelled points), `world/people`, `world/items`
 - `world/robots` (points labelled with names), `agents/<name>/intent` (the requested move)
 - `agents/<name>/log` (text log: requests, outcomes, desires, search requests, plans and
   replans with their purpose, failure forecasts, search fall-backs, step statuses, early
@@ -37,6 +38,7 @@ from cbdi.wire.planner import FORECAST_KINDS, ForecastReport, SearchRequest, Sea
 from cbdi.wire.world import (
     ActionOutcome,
     ActionRequest,
+    MapView,
     Tick,
     WorldInfo,
     WorldSnapshot,
@@ -169,6 +171,31 @@ class RerunLogger:
                 ),
                 static=True,
             )
+        self._graph(view)
+
+    def _graph(self, view: MapView) -> None:
+        """Draw a map's graph: its links as line strips (`world/graph/links`), its places
+        as labelled points (`world/graph/places`)."""
+        if not view.places:
+            return
+        rr, at = self.rr, {p.name: p.at for p in view.places}
+        if view.links:
+            strips = [[at[link.a], at[link.b]] for link in view.links]
+            self.log(
+                "world/graph/links",
+                rr.LineStrips2D(strips, colors=[(150, 150, 150)], radii=0.04),
+                static=True,
+            )
+        self.log(
+            "world/graph/places",
+            rr.Points2D(
+                [p.at for p in view.places],
+                radii=0.12,
+                colors=[(90, 90, 90)],
+                labels=[p.name for p in view.places],
+            ),
+            static=True,
+        )
 
     def on_snapshot(self, m: RecordedMessage) -> None:
         rr, snap = self.rr, decode(m.payload, WorldSnapshot, m.key)

@@ -1,4 +1,4 @@
-//! The offline search loops in one call each (`cbdi_planner.search`): enforced
+//! The offline search loops in one call each (`cbdi_planner.hill_climbing`, `best_first`): enforced
 //! hill-climbing (`enforced_hill_climbing`, `_climb`) and lazy greedy best-first search
 //! with a boosted helpful list (`best_first`), over the nodes of `search`, expanding the
 //! same nodes in the same order as the Python reference.
@@ -10,9 +10,9 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashSet, VecDeque};
 use std::sync::Arc;
 
-/// `search.PLATEAU`: expansions one climbing step may take.
+/// `hill_climbing.PLATEAU`: expansions one climbing step may take.
 const PLATEAU: usize = 1000;
-/// `search._BOOST`: expansions on the helpful list alone after h improves.
+/// `best_first._BOOST`: expansions on the helpful list alone after h improves.
 const BOOST: u32 = 1000;
 
 pub(crate) type Found = Result<Option<Arc<Node>>, Stop>;
@@ -31,7 +31,7 @@ pub(crate) fn successors(
         .collect()
 }
 
-/// `search.enforced_hill_climbing`: climb to strictly better values, breadth-first on
+/// `hill_climbing.enforced_hill_climbing`: climb to strictly better values, breadth-first on
 /// helpful actions, then on all; None when a plateau cannot be escaped.
 pub(crate) fn hill_climb(
     s: &mut Search,
@@ -53,7 +53,7 @@ pub(crate) fn hill_climb(
     Ok(Some(current))
 }
 
-/// `search._climb`: breadth-first from `current` for a goal or a smaller h.
+/// `hill_climbing._climb`: breadth-first from `current` for a goal or a smaller h.
 fn climb(
     s: &mut Search,
     snaps: &[Touches],
@@ -89,7 +89,7 @@ fn climb(
 }
 
 /// An open-list entry of `best_first`: `(priority, steps, tie-break, node or parent,
-/// move to schedule and evaluate or None)` (`search._Lazy`).
+/// move to schedule and evaluate or None)` (`best_first._Lazy`).
 struct Entry {
     h: i64,
     steps: usize,
@@ -126,7 +126,7 @@ impl Ord for Entry {
 
 type Open = BinaryHeap<Reverse<Entry>>;
 
-/// `search.best_first`: greedy best-first search on h (ties: fewer steps), evaluation
+/// `best_first.best_first`: greedy best-first search on h (ties: fewer steps), evaluation
 /// deferred until a node is taken out; partial plans as long as `bound` pruned, at most
 /// `limit` expansions (None when reached, as when exhausted).
 pub(crate) fn best_first(
@@ -198,7 +198,7 @@ pub(crate) fn best_first(
     Ok(None)
 }
 
-/// `search._take`: the node of an entry, scheduled and evaluated now (None: closed,
+/// `best_first._take`: the node of an entry, scheduled and evaluated now (None: closed,
 /// inconsistent or dead).
 fn take(
     s: &mut Search,
@@ -218,7 +218,7 @@ fn take(
     (!node.dead()).then(|| Arc::new(node))
 }
 
-/// `search._next_list`: alternate, staying on the helpful list while boosted.
+/// `best_first._next_list`: alternate, staying on the helpful list while boosted.
 fn next_list(lists: &[Open; 2], turn: usize, boost: u32) -> usize {
     if lists[1].is_empty() {
         return 0;

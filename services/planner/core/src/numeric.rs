@@ -67,7 +67,7 @@ fn py_max(items: &[f64]) -> f64 {
     best
 }
 
-/// `heuristic._interval`: the interval an expression may take given variable intervals.
+/// `relaxation.interval`: the interval an expression may take given variable intervals.
 fn interval(expr: &Expr, lo: &[f64], hi: &[f64]) -> (f64, f64) {
     match expr {
         Expr::Const(v) => (*v, *v),
@@ -115,7 +115,7 @@ impl Cond {
     }
 }
 
-/// `heuristic._may_hold`: whether a comparison may hold given variable intervals.
+/// `relaxation.may_hold`: whether a comparison may hold given variable intervals.
 pub(crate) fn may_hold(cond: &Cond, lo: &[f64], hi: &[f64]) -> bool {
     let (a, b) = interval(&cond.lhs, lo, hi);
     let (c, d) = interval(&cond.rhs, lo, hi);
@@ -152,7 +152,7 @@ impl Assign {
     }
 }
 
-/// `heuristic._widen`: widen a variable's interval by what an effect may do to it.
+/// `relaxation.widen`: widen a variable's interval by what an effect may do to it.
 pub(crate) fn widen(effect: &Assign, lo: &mut [f64], hi: &mut [f64]) {
     let (a, b) = interval(&effect.expr, lo, hi);
     let v = effect.var;

@@ -138,7 +138,7 @@ impl Move {
         &self.steps.last().expect("a move has a step").running
     }
 
-    /// Whether the step that chose the move is helpful in `parent` (`search._helpful_step`).
+    /// Whether the step that chose the move is helpful in `parent` (`best_first._helpful_step`).
     pub(crate) fn helpful_in(&self, parent: &Node) -> bool {
         let first = &self.steps[0];
         first.kind == END
@@ -325,7 +325,7 @@ impl Search {
         }
     }
 
-    /// `search.enforced_hill_climbing` from `root`, in one call without the interpreter
+    /// `hill_climbing.enforced_hill_climbing` from `root`, in one call without the interpreter
     /// lock: `(goal node or None, expansions counted here, whether they ran out)`. Each
     /// expansion calls `tick` (a search clock's, which counts it) or, without one,
     /// counts itself against `left` more (None: no limit).
@@ -356,7 +356,7 @@ impl Search {
         outcome(found, &t)
     }
 
-    /// `search.best_first` from `root` below makespan `bound`, at most `limit`
+    /// `best_first.best_first` from `root` below makespan `bound`, at most `limit`
     /// expansions (None: unlimited), in one call as `hill_climb`.
     #[pyo3(signature = (root, bound, limit, tick, left))]
     fn best_first(
@@ -423,7 +423,7 @@ impl Search {
         }
     }
 
-    /// `search.agenda_stage`: the goal facts reached in `state` plus the one whose
+    /// `hill_climbing.agenda_stage`: the goal facts reached in `state` plus the one whose
     /// relaxed graph layer is lowest (ties: the lowest fact); None: the whole goal.
     pub(crate) fn agenda_stage(&self, state: &State) -> Option<Vec<u32>> {
         let facts = &state.facts;

@@ -23,7 +23,7 @@ from cbdi_planner.errors import PlanInvalid, PlannerError, Unsolvable
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl import parse_domain, parse_problem
 from cbdi_planner.plan import Plan, parse_plan
-from cbdi_planner.search import STRATEGIES, Budget, search
+from cbdi_planner.search import STRATEGIES, Budget, SearchStats, search
 from cbdi_planner.simulate import validate
 from cbdi_planner.task import Task
 
@@ -82,8 +82,8 @@ def _read(path: str) -> str:
         raise FileNotFoundError(f"{path}: not a UTF-8 text file") from None
 
 
-def plan_main(argv: Sequence[str] | None = None) -> int:
-    """`cbdi plan DOMAIN PROBLEM`: print the plan; statistics to stderr or in the JSON."""
+def _plan_parser() -> argparse.ArgumentParser:
+    """The command line of `cbdi plan`."""
     parser = argparse.ArgumentParser(
         prog="cbdi plan",
         description="Plan a PDDL 2.1 temporal problem with cbdi's planner.",
@@ -112,7 +112,12 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--epsilon", type=float, default=0.001)
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
     parser.add_argument("--output", "-o", help="also write the plan to this file")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def plan_main(argv: Sequence[str] | None = None) -> int:
+    """`cbdi plan DOMAIN PROBLEM`: print the plan; statistics to stderr or in the JSON."""
+    args = _plan_parser().parse_args(argv)
     report: dict[str, Any] = {"domain": args.domain, "problem": args.problem}
     try:
         task, phases = _load(args.domain, args.problem)
@@ -152,27 +157,12 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
         compress={"auto": None, "yes": True, "no": False}[args.compress],
     )
     phases["search"] = time.perf_counter() - t0
-    stats = result.stats
-    report["search"] = {
-        "strategy": stats.strategy,
-        "expanded": stats.expanded,
-        "generated": stats.generated,
-        "evaluated": stats.evaluated,
-        "inconsistent": stats.inconsistent,
-        "plans": stats.plans,
-        "compressed": stats.compressed,
-    }
+    report["search"] = _search_report(result.stats)
     report["seconds"] = {k: round(v, 4) for k, v in phases.items()}
     report["improvements"] = improvements
     if result.plan is None:
         status = "timeout" if result.status == "timeout" else "unsolvable"
-        why = {
-            "timeout": f"no plan within the budget ({args.timeout:g} s"
-            + (f", {args.expansions} expansions)" if args.expansions else ")"),
-            "unsolvable": "the search space is exhausted: no plan exists",
-            "incomplete": "enforced hill-climbing got stuck (try --search auto or bfs)",
-        }
-        return _finish(args, report, status, why.get(result.status, result.status))
+        return _finish(args, report, status, _why_no_plan(args, result.status))
     plan = result.plan
     report["plan"] = [
         {"time": a.time, "action": a.name, "duration": a.duration} for a in plan.actions
@@ -183,6 +173,30 @@ def plan_main(argv: Sequence[str] | None = None) -> int:
     if not args.json:
         sys.stdout.write(plan.to_ipc())
     return _finish(args, report, "solved", "")
+
+
+def _search_report(stats: SearchStats) -> dict[str, Any]:
+    """What the search did, for the report."""
+    return {
+        "strategy": stats.strategy,
+        "expanded": stats.expanded,
+        "generated": stats.generated,
+        "evaluated": stats.evaluated,
+        "inconsistent": stats.inconsistent,
+        "plans": stats.plans,
+        "compressed": stats.compressed,
+    }
+
+
+def _why_no_plan(args: argparse.Namespace, status: str) -> str:
+    """Why a search with `status` (not solved) gave no plan."""
+    why = {
+        "timeout": f"no plan within the budget ({args.timeout:g} s"
+        + (f", {args.expansions} expansions)" if args.expansions else ")"),
+        "unsolvable": "the search space is exhausted: no plan exists",
+        "incomplete": "enforced hill-climbing got stuck (try --search auto or bfs)",
+    }
+    return why.get(status, status)
 
 
 def _finish(args: argparse.Namespace, report: dict[str, Any], status: str, error: str) -> int:

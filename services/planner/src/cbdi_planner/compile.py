@@ -282,22 +282,7 @@ class Compiler:
         name = " ".join((action.name, *inst.args))
         durations, fixed = self._duration(inst, env)
         body = Body()
-        try:
-            clauses = self.condition(action.conditions, env, fixed)
-            if clauses:
-                self.effects(action.effects, env, body, fixed)
-            variants = _variants(clauses, body.guards)
-        except Impossible:
-            raise UnsupportedFeature(
-                f"?duration in an effect of {action.name} whose duration is not fixed",
-                file=self.file,
-                line=action.line,
-                column=action.column,
-            ) from None
-        except TooManyDisjuncts as exc:
-            raise self.too_many(
-                exc, f"the condition of {action.name}", action.line, action.column, self.file
-            ) from None
+        variants = self._variants_of(inst, env, fixed, body)
         if action.duration is None:
             effs = body.at(INST)
             return [
@@ -332,6 +317,30 @@ class Compiler:
                 )
             )
         return out
+
+    def _variants_of(
+        self, inst: Instance, env: Env, fixed: float | None, body: Body
+    ) -> list[tuple[Clause, tuple[CondEffect, ...]]]:
+        """Compile an instance's condition (its disjuncts) and effects into `body`;
+        return `_variants` of them. An effect reading a duration that is not fixed, or
+        a condition of too many disjuncts, is an error naming the action."""
+        action = inst.action
+        try:
+            clauses = self.condition(action.conditions, env, fixed)
+            if clauses:
+                self.effects(action.effects, env, body, fixed)
+            return _variants(clauses, body.guards)
+        except Impossible:
+            raise UnsupportedFeature(
+                f"?duration in an effect of {action.name} whose duration is not fixed",
+                file=self.file,
+                line=action.line,
+                column=action.column,
+            ) from None
+        except TooManyDisjuncts as exc:
+            raise self.too_many(
+                exc, f"the condition of {action.name}", action.line, action.column, self.file
+            ) from None
 
     def goal(self, conds: tuple[Cond, ...], file: str) -> list[Conj]:
         """Return the disjuncts of a goal; [] when it can never hold."""

@@ -6,7 +6,8 @@ the invariant). A running action starts with its token, and its `ended` token is
 goal, so the relaxed plan must finish what the state has started. Deletes are ignored;
 numeric conditions are relaxed to intervals that effects can only widen. The graph is
 built with precondition counters, so one evaluation costs time linear in the
-relaxed-reachable part of the task, not in the number of layers times actions.
+relaxed-reachable part of the task, not in the number of layers times actions. The
+relaxed operators and numeric intervals are `relaxation`'s.
 """
 
 from __future__ import annotations
@@ -18,9 +19,10 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 from cbdi_planner.core import compiled
+from cbdi_planner.relaxation import RelaxedOp, may_hold, relaxed_ops, widen
 from cbdi_planner.state import State
-from cbdi_planner.stn import END, INST, START, TIL
-from cbdi_planner.task import NExpr, NumAssign, NumCond, Task
+from cbdi_planner.stn import END, START, TIL
+from cbdi_planner.task import Task
 from cbdi_planner.task import bit_positions as _bits
 
 __all__ = ["INFINITE", "Estimate", "RelaxedPlanGraph"]
@@ -43,63 +45,6 @@ class Estimate:
     duration: float = 0.0
 
 
-@dataclass(frozen=True, slots=True)
-class _Op:
-    kind: int
-    action: int
-    pre: tuple[int, ...]
-    add: tuple[int, ...]
-    num_pre: tuple[NumCond, ...]
-    num_eff: tuple[NumAssign, ...]
-
-
-def _interval(expr: NExpr, lo: list[float], hi: list[float]) -> tuple[float, float]:
-    tag = expr[0]
-    if tag == "c":
-        return float(expr[1]), float(expr[1])
-    if tag == "v":
-        return lo[expr[1]], hi[expr[1]]
-    (a, b), (c, d) = _interval(expr[1], lo, hi), _interval(expr[2], lo, hi)
-    if tag == "+":
-        return a + c, b + d
-    if tag == "-":
-        return a - d, b - c
-    if tag == "*":
-        products = [
-            x * y for x in (a, b) for y in (c, d) if not (math.isinf(x) or math.isinf(y))
-        ] or [-math.inf, math.inf]
-        has_inf = any(math.isinf(v) for v in (a, b, c, d))
-        return (-math.inf, math.inf) if has_inf else (min(products), max(products))
-    return -math.inf, math.inf
-
-
-def _may_hold(cond: NumCond, lo: list[float], hi: list[float]) -> bool:
-    (a, b), (c, d) = _interval(cond.lhs, lo, hi), _interval(cond.rhs, lo, hi)
-    if any(math.isnan(v) for v in (a, b, c, d)):
-        return False
-    if cond.op in ("<", "<="):
-        return a < d or (cond.op == "<=" and a <= d)
-    if cond.op in (">", ">="):
-        return b > c or (cond.op == ">=" and b >= c)
-    return a <= d and c <= b
-
-
-def _widen(effect: NumAssign, lo: list[float], hi: list[float]) -> bool:
-    a, b = _interval(effect.expr, lo, hi)
-    old = (lo[effect.var], hi[effect.var])
-    if effect.op == "assign":
-        lo[effect.var], hi[effect.var] = min(old[0], a), max(old[1], b)
-    elif effect.op in ("increase", "decrease"):
-        up, down = (b > 0, a < 0) if effect.op == "increase" else (a < 0, b > 0)
-        if up:
-            hi[effect.var] = math.inf
-        if down:
-            lo[effect.var] = -math.inf
-    else:
-        lo[effect.var], hi[effect.var] = -math.inf, math.inf
-    return (lo[effect.var], hi[effect.var]) != old
-
-
 class RelaxedPlanGraph:
     """Precomputed relaxed operators of a task; `estimate` evaluates one state."""
 
@@ -118,67 +63,7 @@ class RelaxedPlanGraph:
         self.pending = n_facts
         self.ended = n_facts + n_actions
         self.size = n_facts + 2 * n_actions + len(task.tils)
-        self.ops: list[_Op] = []
-        # then[k]: the end op that start op k enables by itself (its other conditions
-        # are the start's conditions or effects), fired one layer later without counters.
-        then: dict[int, int] = {}
-        for a in task.actions:
-            start = a.start
-            cond_add = 0
-            for ce in start.cond_effects:
-                cond_add |= ce.add
-            if a.end is None:
-                self.ops.append(
-                    _Op(
-                        INST,
-                        a.index,
-                        _bits(start.pre),
-                        _bits(start.add | cond_add),
-                        start.num_pre,
-                        start.num_eff,
-                    )
-                )
-                continue
-            end_add = a.end.add
-            for ce in a.end.cond_effects:
-                end_add |= ce.add
-            if compress:
-                self.ops.append(
-                    _Op(
-                        START,
-                        a.index,
-                        _bits(start.pre | ((a.inv | a.end.pre) & ~start.add)),
-                        _bits(start.add | cond_add | end_add),
-                        start.num_pre + a.end.num_pre + a.inv_num,
-                        start.num_eff + a.end.num_eff,
-                    )
-                )
-                continue
-            pre = start.pre | (a.inv & ~start.add)
-            if not (a.end.pre | a.inv) & ~(pre | start.add):
-                then[len(self.ops)] = len(self.ops) + 1
-            self.ops.append(
-                _Op(
-                    START,
-                    a.index,
-                    _bits(pre),
-                    (*_bits(start.add | cond_add), self.pending + a.index),
-                    start.num_pre,
-                    start.num_eff,
-                )
-            )
-            self.ops.append(
-                _Op(
-                    END,
-                    a.index,
-                    (*_bits(a.end.pre | a.inv), self.pending + a.index),
-                    (*_bits(end_add), self.ended + a.index),
-                    a.end.num_pre + a.inv_num,
-                    a.end.num_eff,
-                )
-            )
-        for i, til in enumerate(task.tils):
-            self.ops.append(_Op(TIL, i, (), _bits(til.add), (), ()))
+        self.ops, then = relaxed_ops(task, compress, self.pending, self.ended)
         self._index(then)
         module = compiled(core)
         self._core = module.Graph(self) if module is not None else None
@@ -277,7 +162,7 @@ class RelaxedPlanGraph:
         self.chained_end = {ops[k].action: k for k in chained}
         self.start_op = {op.action: k for k, op in enumerate(ops) if op.kind == START}
 
-    def _duration(self, op: _Op) -> float:
+    def _duration(self, op: RelaxedOp) -> float:
         """Return the (least) duration an op stands for: its action's, for a start."""
         if op.kind != START:
             return 0.0
@@ -391,7 +276,7 @@ class RelaxedPlanGraph:
                     continue
                 numeric, nxt, live, quiet = fire[k]
                 if numeric:
-                    if op_num_pre[k] and not all(_may_hold(c, lo, hi) for c in op_num_pre[k]):
+                    if op_num_pre[k] and not all(may_hold(c, lo, hi) for c in op_num_pre[k]):
                         held.append(k)
                         continue
                     if op_num_eff[k]:
@@ -413,7 +298,7 @@ class RelaxedPlanGraph:
                 return None
             for k in acting:
                 for effect in op_num_eff[k]:
-                    _widen(effect, lo, hi)
+                    widen(effect, lo, hi)
             waiting = held
             depth = next_level
             missing = [g for g in missing if level[g] < 0]

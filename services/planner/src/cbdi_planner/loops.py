@@ -1,6 +1,6 @@
 """The compiled core's search loops: one call runs a whole loop (issue 29).
 
-`search.enforced_hill_climbing` and `search.best_first` hand their loop to the compiled
+`hill_climbing.enforced_hill_climbing` and `best_first.best_first` hand their loop to the compiled
 core (`cbdi_planner_core.Search`) when the expander runs it: the nodes stay there, and
 Python sees the loop's result only. The loops expand the same nodes in the same order
 as the Python reference and count the same (`tests/planner/test_compiled_core.py`).
@@ -41,14 +41,14 @@ def runs(ex: Expander, root: Node) -> bool:
 
 
 def hill_climb(ex: Expander, root: Node, clock: Clock) -> Node | None:
-    """`search.enforced_hill_climbing`, in one call."""
+    """`hill_climbing.enforced_hill_climbing`, in one call."""
     return _run(ex, clock, lambda tick, left: ex.native.hill_climb(root.handle, tick, left))
 
 
 def best_first(
     ex: Expander, root: Node, clock: Clock, bound: float = math.inf, limit: int | None = None
 ) -> Node | None:
-    """`search.best_first`, in one call."""
+    """`best_first.best_first`, in one call."""
     return _run(
         ex,
         clock,

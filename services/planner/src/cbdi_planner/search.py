@@ -6,25 +6,24 @@ hill-climbing with helpful actions for the whole goal (fast, incomplete), fallin
 to complete lazy best-first search, as FF and JavaFF do. `ehc` and `bfs` run one of
 them alone. The anytime mode then keeps searching for plans with a shorter makespan:
 after an agenda's plan, climbing to the whole goal; then weighted A* on makespan with
-branch-and-bound pruning.
+branch-and-bound pruning. The searches themselves are `hill_climbing`'s (enforced
+hill-climbing, the goal agenda) and `best_first`'s (greedy, anytime weighted A*); this
+module runs them within a budget.
 """
 
 from __future__ import annotations
 
-import heapq
-import math
 import time
-from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from cbdi_planner import loops
+from cbdi_planner.best_first import best_first, improving
 from cbdi_planner.compression import needs_concurrency
 from cbdi_planner.errors import SearchTimeout
-from cbdi_planner.expansion import Expander, Move, Node
+from cbdi_planner.expansion import Expander, Node
+from cbdi_planner.hill_climbing import enforced_hill_climbing, goal_agenda
 from cbdi_planner.plan import Plan, plan_from_timeline
-from cbdi_planner.state import State, initial_state, is_goal
-from cbdi_planner.stn import END, TIL, Step
+from cbdi_planner.state import State, initial_state
 from cbdi_planner.task import Task
 
 __all__ = ["Budget", "SearchResult", "SearchStats", "search"]
@@ -110,203 +109,6 @@ class _Clock:
         return self.now() - self.started
 
 
-def enforced_hill_climbing(ex: Expander, root: Node, clock: _Clock) -> Node | None:
-    """Climb to strictly better heuristic values by breadth-first search on helpful actions.
-
-    When the helpful actions of a plateau lead nowhere better, the breadth-first search
-    is run again on all actions before giving up. States are remembered per climb step
-    only (as in FF), so a state passed over on one step may serve a later one. Return a
-    goal node, or None when a plateau cannot be escaped (the caller may fall back to
-    best-first search).
-    """
-    if loops.runs(ex, root):
-        return loops.hill_climb(ex, root, clock)
-    current = root
-    while not ex.reached(current.state):
-        better = _climb(ex, current, clock, helpful_only=True)
-        if better is None:
-            better = _climb(ex, current, clock, helpful_only=False)
-        if better is None:
-            return None
-        current = better
-    return current
-
-
-def _climb(ex: Expander, current: Node, clock: _Clock, helpful_only: bool) -> Node | None:
-    """Breadth-first search from `current` for a goal or a node with a smaller h.
-
-    Give up after `PLATEAU` expansions: a plateau that wide is best left to best-first
-    search, which keeps what it learns.
-    """
-    seen = {current.state.key()}
-    queue = deque([current])
-    for _ in range(PLATEAU):
-        if not queue:
-            break
-        node = queue.popleft()
-        clock.tick()
-        # Shortest partial plans first: of equally good successors, the one that runs
-        # in parallel with the plan so far wins.
-        successors = sorted(
-            ex.successors(node, helpful_only=helpful_only), key=lambda s: s[1].makespan
-        )
-        for state, timeline, running in successors:
-            key = state.key()
-            if key in seen:
-                continue
-            seen.add(key)
-            child = ex.evaluate(state, timeline, running)
-            if ex.dead(child):
-                continue
-            if ex.reached(state) or child.h < current.h:
-                return child
-            queue.append(child)
-    return None
-
-
-def best_first(
-    ex: Expander,
-    root: Node,
-    clock: _Clock,
-    bound: float = math.inf,
-    limit: int | None = None,
-) -> Node | None:
-    """Run greedy best-first search on h (ties: fewer steps); None if exhausted.
-
-    Partial plans as long as `bound` are pruned; `limit` caps the expansions (None
-    when reached, as when exhausted).
-
-    Evaluation is deferred: a successor waits in the open list with its parent's h and
-    is evaluated only when taken out, so the heuristic runs once per expanded node
-    rather than once per generated one. Successors reached by a helpful happening also
-    go to a second open list, taken in turn with the first and exclusively for a while
-    after h improves (Fast Downward's boosted dual queue): helpful actions lead the
-    way, the full list keeps the search complete.
-    """
-    if loops.runs(ex, root):
-        return loops.best_first(ex, root, clock, bound, limit)
-    lists: tuple[list[_Lazy], list[_Lazy]] = ([(root.h, 0, 0, root, None)], [])
-    closed: set[object] = set()
-    counter, turn, boost, best_h = 0, 0, 0, root.h
-    while lists[0] or lists[1]:
-        turn = _next_list(lists, turn, boost)
-        boost = max(0, boost - 1)
-        node = _take(ex, heapq.heappop(lists[turn]), closed)
-        if node is None or node.makespan >= bound - 1e-9:
-            continue
-        closed.add(node.state.key())
-        if ex.reached(node.state):
-            return node
-        if node.h < best_h:
-            best_h, boost = node.h, _BOOST
-        if limit is not None:
-            if limit <= 0:
-                return None
-            limit -= 1
-        clock.tick()
-        steps = len(node.timeline.steps)
-        for move in ex.moves(node):
-            if move.state.key() in closed:
-                continue
-            counter += 1
-            entry = (node.h, steps + len(move.steps), counter, node, move)
-            heapq.heappush(lists[0], entry)
-            if _helpful_step(node, move.first):
-                heapq.heappush(lists[1], entry)
-    return None
-
-
-# (priority, steps, tie-break, node or parent, move to schedule and evaluate or None)
-_Lazy = tuple[float, int, int, Node, Move | None]
-_Entry = tuple[float, int, int, Node]
-_BOOST = 1000  # expansions on the helpful list alone after h improves
-
-
-def _take(ex: Expander, entry: _Lazy, closed: set[object]) -> Node | None:
-    """Return the node of an open-list entry, scheduling and evaluating it now.
-
-    None: the node is closed, its timeline inconsistent or the heuristic finds it dead.
-    """
-    parent, move = entry[3], entry[4]
-    if move is None:
-        return None if parent.state.key() in closed else parent
-    if move.state.key() in closed:
-        return None
-    timeline = ex.schedule(parent.timeline, move)
-    if timeline is None:
-        return None
-    node = ex.evaluate(move.state, timeline, move.running)
-    return None if ex.dead(node) else node
-
-
-def _next_list(lists: tuple[list[_Lazy], list[_Lazy]], turn: int, boost: int) -> int:
-    """Alternate between the open lists, staying on the helpful one while boosted."""
-    if not lists[1]:
-        return 0
-    if boost > 0 or not lists[0]:
-        return 1
-    return turn ^ 1
-
-
-def _helpful_step(parent: Node, step: Step) -> bool:
-    """Tell whether the step that chose a move is helpful in `parent` (ends always are)."""
-    return step.kind in (END, TIL) or (step.kind, step.action) in parent.helpful
-
-
-def improving(
-    ex: Expander, root: Node, clock: _Clock, bound: float, weights: tuple[float, ...]
-) -> Iterator[Node]:
-    """Yield goal nodes of ever shorter makespan, below `bound` (anytime weighted A*).
-
-    A node's priority is its makespan plus a weight times the relaxed plan's duration.
-    Each goal lowers the bound, which prunes every node whose partial plan is already
-    as long (branch and bound), and moves to the next, smaller weight: the open list
-    is reordered rather than thrown away, so no search effort is lost.
-    """
-    weight, later = weights[0], list(weights[1:])
-    frontier: list[_Entry] = [(0.0, 0, 0, root)]
-    best_span: dict[object, float] = {root.state.key(): 0.0}
-    counter = 0
-    while frontier:
-        node = heapq.heappop(frontier)[3]
-        if node.makespan >= bound - 1e-9 or best_span.get(node.state.key(), 0.0) < node.makespan:
-            continue
-        clock.tick()
-        for state, timeline, running in ex.successors(node):
-            span = timeline.makespan
-            if span >= bound - 1e-9:
-                continue
-            key = state.key()
-            known = best_span.get(key)
-            if known is not None and known <= span + 1e-9:
-                continue
-            best_span[key] = span
-            child = ex.evaluate(state, timeline, running)
-            if ex.dead(child):
-                continue
-            if ex.reached(state):
-                bound = span
-                yield child
-                if later:
-                    weight = later.pop(0)
-                    frontier = _reweigh(frontier, weight, bound)
-                continue
-            counter += 1
-            f = span + weight * child.h_time
-            heapq.heappush(frontier, (f, child.h, counter, child))
-
-
-def _reweigh(frontier: list[_Entry], weight: float, bound: float) -> list[_Entry]:
-    """Return the open list under a new weight, without nodes the bound prunes."""
-    out = [
-        (n.makespan + weight * n.h_time, h, c, n)
-        for _, h, c, n in frontier
-        if n.makespan < bound - 1e-9
-    ]
-    heapq.heapify(out)
-    return out
-
-
 def search(
     task: Task,
     *,
@@ -358,46 +160,6 @@ def search(
     stats.inconsistent = sum(e.inconsistent for e in counted)
     stats.seconds = clock.elapsed()
     return result
-
-
-def goal_agenda(ex: Expander, root: Node, clock: _Clock) -> Node | None:
-    """Reach the goal facts one at a time, nearest first, by enforced hill-climbing.
-
-    Each stage aims at the goals reached so far plus the one whose relaxed planning
-    graph layer is lowest now, and continues the plan of the stage before; goals a
-    stage reaches by the way count as reached. The last stage aims at the whole goal
-    (with its negative and numeric parts). Each relaxed plan is then small and cheap:
-    the graph stops at the stage's goals. None when a stage gets stuck (the caller
-    searches for the whole goal at once instead) or the goal has fewer than two facts
-    left to reach.
-    """
-    if (ex.task.goal & ~root.state.facts).bit_count() < 2:
-        return None
-    node: Node | None = root
-    try:
-        while node is not None and not is_goal(ex.task, node.state):
-            ex.aim(agenda_stage(ex, node.state))
-            start = ex.reevaluate(node)
-            node = None if ex.dead(start) else enforced_hill_climbing(ex, start, clock)
-        return node
-    finally:
-        ex.aim(None)
-
-
-def agenda_stage(ex: Expander, state: State) -> int | None:
-    """Return the goal agenda's next stage from `state`: the goal facts reached so far plus
-    the one whose relaxed planning graph layer is lowest (ties: the lowest fact). None:
-    aim at the whole goal (fewer than two goal facts left, or one is unreachable, which
-    the whole goal's value then tells)."""
-    goal = ex.task.goal
-    remaining = goal & ~state.facts
-    if remaining.bit_count() < 2:
-        return None
-    levels = ex.rpg.levels(state, remaining)
-    if levels is None:
-        return None
-    nearest = min(levels, key=lambda f: (levels[f], f))
-    return (goal & state.facts) | (1 << nearest)
 
 
 def _first_plan(
@@ -461,4 +223,3 @@ def _improve(
 
 WEIGHTS = (2.0, 1.0)
 IMPROVE_LIMIT = 5000  # expansions of one bounded greedy search for a shorter plan
-PLATEAU = 1000  # expansions one climbing step of enforced hill-climbing may take

@@ -122,6 +122,32 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "(kill: SIGKILL) or frozen (stop: SIGSTOP) as the world's epoch EPOCH reaches it, "
         "in its first life only; repeatable (docs/faults.md)",
     )
+    _supervision_arguments(p)
+    p.add_argument(
+        "--secure",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="authenticate every service and let each do only its own part (default; "
+        "docs/security.md); --no-secure: any local client may do anything",
+    )
+    p.add_argument(
+        "--run-dir",
+        metavar="DIR",
+        default="",
+        help="where the run's credentials go (mode 0600; default: found again from the "
+        "router's port, so that `cbdi ctl --connect` finds the operator's)",
+    )
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        default="",
+        help="record every message of the run to an MCAP file (needs cbdi-monitor)",
+    )
+    return p
+
+
+def _supervision_arguments(p: argparse.ArgumentParser) -> None:
+    """How `cbdi up` watches its processes: heartbeats, freezes, niceness, processes."""
     p.add_argument(
         "--heartbeat",
         type=float,
@@ -161,27 +187,6 @@ def _run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="run each BDI agent's planner, scheduler and executor in one process "
         "(`cbdi agent`): about half the memory per robot",
     )
-    p.add_argument(
-        "--secure",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="authenticate every service and let each do only its own part (default; "
-        "docs/security.md); --no-secure: any local client may do anything",
-    )
-    p.add_argument(
-        "--run-dir",
-        metavar="DIR",
-        default="",
-        help="where the run's credentials go (mode 0600; default: found again from the "
-        "router's port, so that `cbdi ctl --connect` finds the operator's)",
-    )
-    p.add_argument(
-        "--record",
-        metavar="FILE",
-        default="",
-        help="record every message of the run to an MCAP file (needs cbdi-monitor)",
-    )
-    return p
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:

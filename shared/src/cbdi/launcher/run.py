@@ -157,28 +157,7 @@ async def _launch(
     endpoint: str,
     secrets: RunSecrets | None,
 ) -> RunSummary:
-    state_dir = tempfile.mkdtemp(prefix="cbdi-run-")  # private (0700): the world's state
-    try:
-        state = f"{state_dir}/world.state"
-        specs = run_specs(
-            scenario,
-            endpoint,
-            opts.record,
-            opts.heartbeat,
-            opts.agent_process,
-            state,
-            secrets,
-            opts.faults,
-        )
-    except BaseException:
-        shutil.rmtree(state_dir, ignore_errors=True)
-        raise
-    stalls = f"{state_dir}/stall"  # each process's stall evidence, for the watchdog
-    os.makedirs(stalls, exist_ok=True)
-    procs = [
-        ManagedProcess(_niced(spec, opts.agent_nice), opts.restart, say, f"{stalls}/{k}.heartbeat")
-        for k, spec in enumerate(specs)
-    ]
+    state_dir, procs = _processes(scenario, opts, say, endpoint, secrets)
     planning = [a.name for a in scenario.agents if "planner" in AGENT_KINDS[a.kind]]
     planners = tally.PlannerTally(planning)
     counts = RunCounts(planners)
@@ -219,13 +198,52 @@ async def _launch(
     counts.fold(summary)
     summary.planner = planners.summary()
     summary.memory = memory.summary()
+    _fold_processes(procs, summary)
+    return summary
+
+
+def _processes(
+    scenario: Scenario,
+    opts: LaunchOptions,
+    say: Callable[[str, str], None],
+    endpoint: str,
+    secrets: RunSecrets | None,
+) -> tuple[str, list[ManagedProcess]]:
+    """Make the run's private folder (0700: the world's state file, each process's stall
+    evidence for the watchdog) and its processes, not started; return both."""
+    state_dir = tempfile.mkdtemp(prefix="cbdi-run-")  # private (0700): the world's state
+    try:
+        state = f"{state_dir}/world.state"
+        specs = run_specs(
+            scenario,
+            endpoint,
+            opts.record,
+            opts.heartbeat,
+            opts.agent_process,
+            state,
+            secrets,
+            opts.faults,
+        )
+    except BaseException:
+        shutil.rmtree(state_dir, ignore_errors=True)
+        raise
+    stalls = f"{state_dir}/stall"  # each process's stall evidence, for the watchdog
+    os.makedirs(stalls, exist_ok=True)
+    procs = [
+        ManagedProcess(_niced(spec, opts.agent_nice), opts.restart, say, f"{stalls}/{k}.heartbeat")
+        for k, spec in enumerate(specs)
+    ]
+    return state_dir, procs
+
+
+def _fold_processes(procs: list[ManagedProcess], summary: RunSummary) -> None:
+    """Put each process's restarts, freezes, starvation and exit codes in the summary."""
     for proc in procs:
         summary.restarts[proc.spec.service] = proc.restarts
         summary.freezes[proc.spec.service] = proc.freezes
         summary.freeze_kills[proc.spec.service] = proc.freeze_kills
         summary.starved[proc.spec.service] = proc.starved
         summary.exit_codes[proc.spec.service] = proc.exit_codes
-    return summary
 
 
 def _login(secrets: RunSecrets | None) -> tuple[str, str]:

@@ -38,6 +38,8 @@ __all__ = [
     "EpochAck",
     "ItemView",
     "MapLayer",
+    "MapLink",
+    "MapPlace",
     "MapView",
     "OutcomeStatus",
     "Percept",
@@ -213,13 +215,50 @@ class MapLayer(Message, frozen=True, tag="cbdi.world.MapLayer/1"):
     size: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 1.0
 
 
+class MapPlace(Message, frozen=True, tag="cbdi.world.MapPlace/1"):
+    """One place of a map that is a graph (a room, a bed of plants, a cell its PDDL
+    names): where the views draw it (`at`, in cells: x the column, y the row, within
+    the view), the character `glyph` (text) and its name (a label in rerun)."""
+
+    name: Symbol
+    at: Pose
+    glyph: Annotated[str, msgspec.Meta(pattern="^[!-~]$")] = "o"
+
+
+class MapLink(Message, frozen=True, tag="cbdi.world.MapLink/1"):
+    """A link between two places of the view, either way: a line the views draw."""
+
+    a: Symbol
+    b: Symbol
+
+
+MAX_PLACES = 100_000  # the floor cells of a 300x300 map, each a place
+
+
 class MapView(Message, frozen=True, tag="cbdi.world.MapView/1"):
-    """How the views draw a map that has a floor of cells: its size and static layers.
-    What the cells mean is the domain's (its knowledge reads `WorldInfo.map`)."""
+    """How the views draw a map: its size (cells), static layers of cells, and, for a
+    map that is a graph, its places and the links between them. What the cells and
+    places mean is the domain's (its knowledge reads `WorldInfo.map`). Every place lies
+    within the size, names are unique, and a link joins two different places."""
 
     width: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
     height: Annotated[int, msgspec.Meta(ge=1, le=10_000)]
     layers: Annotated[list[MapLayer], msgspec.Meta(max_length=64)] = []
+    places: Annotated[list[MapPlace], msgspec.Meta(max_length=MAX_PLACES)] = []
+    links: Annotated[list[MapLink], msgspec.Meta(max_length=4 * MAX_PLACES)] = []
+
+    def __post_init__(self) -> None:
+        names: set[str] = set()
+        for p in self.places:
+            x, y = p.at
+            if not (0.0 <= x <= self.width and 0.0 <= y <= self.height):
+                raise ValueError(f"place {p.name} at {x:g},{y:g} is off the map")
+            if p.name in names:
+                raise ValueError(f"place {p.name} appears twice")
+            names.add(p.name)
+        for link in self.links:
+            if link.a == link.b or link.a not in names or link.b not in names:
+                raise ValueError(f"link {link.a}-{link.b} does not join two places of the map")
 
 
 # A domain's own map, encoded by its simulator: one message of the domain's own type (the

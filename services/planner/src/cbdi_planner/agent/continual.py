@@ -4,13 +4,13 @@
 into messages to publish, and owns the search in progress (`search`), whose rounds the
 service runs in a worker thread (`round()`, then `after_round()` on the loop).
 
-Lines (one plan id each) and searches are `cbdi_planner.agent.lines`'; a repair, a
-revised goal or an improvement starts a new line from the committed state.
+Lines (one plan id each) and searches are `cbdi_planner.agent.lines`', the tasks it
+plans (from the beliefs or a request's problem) `cbdi_planner.agent.tasks`'; a repair,
+a revised goal or an improvement starts a new line from the committed state.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 from collections.abc import Callable
 from itertools import count
@@ -21,25 +21,23 @@ from cbdi.agentfile import PlanningSettings
 from cbdi.beliefs import BeliefSet
 from cbdi.wire.agent import ActionStatus, PartialPlan
 from cbdi.wire.base import Message
-from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
+from cbdi.wire.planner import SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.lines import (
     Line,
     Search,
     extend,
-    failure_status,
+    forecast_report,
     plan_prefix,
     round_report,
     search_status,
 )
 from cbdi_planner.agent.problem import (
     GoalError,
-    beliefs_from_problem,
     check_goal,
-    goal_of,
-    problem_from_beliefs,
 )
+from cbdi_planner.agent.tasks import AgentTasks
 from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import (
     FAILS_LATER,
@@ -60,9 +58,6 @@ from cbdi_planner.continual import (
 )
 from cbdi_planner.continual.improver import Improver
 from cbdi_planner.errors import PlannerError, Unsolvable
-from cbdi_planner.expansion import prepare
-from cbdi_planner.heuristic import RelaxedPlanGraph
-from cbdi_planner.pddl import parse_problem
 from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan
 from cbdi_planner.state import State, initial_state
@@ -73,7 +68,7 @@ __all__ = ["ContinualPlanner"]
 Log = Callable[..., None]
 
 
-class ContinualPlanner:
+class ContinualPlanner(AgentTasks):
     """The continual planner of one agent."""
 
     def __init__(
@@ -119,73 +114,6 @@ class ContinualPlanner:
             old.thread.close()  # its worker thread stops
         self._search = new
 
-    # -- bounds and problems ---------------------------------------------------------------
-    def bound(self) -> RoundBound:
-        s = self.settings
-        return RoundBound(
-            seconds=s.round_interval if s.round_interval > 0 else None,
-            expansions=s.expansions_per_round if s.expansions_per_round > 0 else None,
-            plan_size=s.plan_size_limit if s.plan_size_limit > 0 else None,
-        )
-
-    def task(self, goal: list[list[str]]) -> Task:
-        """The task of reaching `goal` from the beliefs (grounded once, see `Groundings`)."""
-        return self.groundings.task(self.beliefs, goal)
-
-    def warm(self, beliefs: BeliefSet, req: SearchRequest | None = None) -> None:
-        """Ground ahead (call from a worker thread) the task that `on_beliefs(beliefs)` or
-        `on_request(req)` will plan with, and build its relaxed planning graph, so they
-        find both built and the event loop is not held up by either (on campus-30x30 a
-        grounding takes about 200 ms, a graph 100 ms); errors are left for them to
-        report."""
-        goal: list[list[str]] | None
-        if req is not None and req.problem and req.kind != "cancel":
-            try:  # a request's own problem: read here, not on the loop (campus: 100 ms)
-                read = self._read_problem(req)
-            except (GoalError, PlannerError):
-                return
-            self._read = (req, read)
-            beliefs, goal = read
-        else:
-            goal = self.goal_of(req) if req is not None else None
-            if goal is None and self.request is not None:
-                goal = [list(g) for g in self.request.goal]
-        if not goal:
-            return
-        self.transients.see(beliefs)
-        with contextlib.suppress(GoalError, PlannerError):
-            task = self.groundings.task(beliefs, goal)
-            RelaxedPlanGraph.of(task)  # what reaches_goal uses
-            prepare(task)  # what a search of it expands with
-
-    def goal_of(self, req: SearchRequest) -> list[list[str]] | None:
-        """The goal `req` makes the search aim at (a revision: the union of goals)."""
-        if req.kind == "cancel":
-            return None
-        goal = [list(g) for g in req.goal]
-        if req.kind == "revise" and self.request is not None:
-            union = [list(g) for g in self.request.goal]
-            return union + [g for g in goal if g not in union]
-        return goal
-
-    def request_task(self, goal: list[list[str]]) -> Task:
-        """`task`, raising Unsolvable if the goal is unreachable from the beliefs even
-        with deletes ignored (what grounding from the beliefs alone would say)."""
-        task = self.task(goal)
-        if not reaches_goal(task):
-            raise Unsolvable("no action reaches the goal from these beliefs (relaxed)")
-        return task
-
-    def at_grid(self, t: float) -> float:
-        """The first epoch boundary at or after `t`: when a step planned now can start
-        (in lockstep the executor acts after the planner in the same epoch)."""
-        return math.ceil(t / self.grid - 1e-9) * self.grid
-
-    def on_grid(self, t: float) -> float:
-        """`t` on the epoch grid, as a step's start is published (the search separates
-        steps by a small epsilon that the grid rounds away)."""
-        return round(t / self.grid) * self.grid
-
     # -- inputs ---------------------------------------------------------------------------
     def on_request(self, req: SearchRequest) -> list[Message]:
         """Start, revise (the union of goals) or cancel the search.
@@ -213,24 +141,6 @@ class ContinualPlanner:
     def search_follows_nothing(line: Line) -> bool:
         """Whether no step of `line` runs (a new search need not follow it)."""
         return not any(st == "running" for st in line.statuses.values())
-
-    def _with_problem(self, req: SearchRequest) -> SearchRequest:
-        """Take a request's own PDDL problem as the beliefs (and goal, if it has none)."""
-        if not req.problem or req.kind == "cancel":
-            return req
-        read, self._read = self._read, None
-        beliefs, goal = read[1] if read and read[0] is req else self._read_problem(req)
-        self.beliefs = beliefs
-        self.transients.see(beliefs)
-        return replace(req, goal=goal, problem="")
-
-    def _read_problem(self, req: SearchRequest) -> tuple[BeliefSet, list[list[str]]]:
-        """The beliefs and goal of a request's own PDDL problem (its goal if it has one)."""
-        problem = parse_problem(req.problem, self.domain, f"request {req.request_id}")
-        goal = [list(g) for g in req.goal] or goal_of(problem)
-        beliefs = beliefs_from_problem(problem)
-        problem_from_beliefs(self.domain, beliefs, goal)  # the goal fits the domain
-        return beliefs, goal
 
     def _on_request(self, req: SearchRequest) -> list[Message]:
         if req.kind == "cancel":
@@ -328,18 +238,7 @@ class ContinualPlanner:
         key = (fc.kind, failed, fc.reason)
         if key != self.last_forecast:
             self.last_forecast = key
-            done = fc.commitment.count
-            out.append(
-                ForecastReport(
-                    agent=self.agent,
-                    plan_id=line.plan_id,
-                    kind=fc.kind,
-                    failed_step=failed,
-                    reason=fc.reason,
-                    committed=line.step_ids[done - 1] if done else "",
-                    time=self.now,
-                )
-            )
+            out.append(forecast_report(self.agent, line, fc, self.now))
         if fc.kind == FAILS_LATER and f"{failed}:{fc.reason}" != self.repair_trigger:
             self.repair_trigger = f"{failed}:{fc.reason}"
             self.log("forecast_failure", plan=line.plan_id, step=failed, reason=fc.reason)
@@ -433,23 +332,11 @@ class ContinualPlanner:
         """Turn a round's events into messages; drop a search replaced meanwhile."""
         if search is not self.search:
             return []
+        outdated = self._outdated(search, events)
+        if outdated is not None:
+            return outdated
         out: list[Message] = []
         better: ImprovedPlan | None = None
-        if search.repairs is not None:
-            old = search.repairs
-            started = sum(1 for s in old.statuses.values() if s in ("running", "succeeded"))
-            if started > search.thread.prefix:
-                # Alg. 2 line 9: execution committed past this search's prefix.
-                self.log("outdated", plan=search.line.plan_id, purpose=search.purpose)
-                self.search, self.repair_trigger = None, ""
-                self.last_forecast = ("", "", "")
-                rounds: list[Message] = [
-                    self._round(search, e) for e in events if isinstance(e, RoundDone)
-                ]
-                if search.purpose == "new":
-                    # A new plan must come: search again after what runs now.
-                    return rounds + self._again_from_committed(search, 0)
-                return rounds
         for event in events:
             if isinstance(event, RoundDone):
                 out.append(self._round(search, event))
@@ -491,6 +378,25 @@ class ContinualPlanner:
             self.search = None
         return out
 
+    def _outdated(self, search: Search, events: list[Event]) -> list[Message] | None:
+        """Drop `search` if execution committed past its prefix (Alg. 2 line 9): its
+        rounds' reports, and a new plan's search again after what runs now. None: it
+        is not outdated."""
+        if search.repairs is None:
+            return None
+        old = search.repairs
+        started = sum(1 for s in old.statuses.values() if s in ("running", "succeeded"))
+        if started <= search.thread.prefix:
+            return None
+        self.log("outdated", plan=search.line.plan_id, purpose=search.purpose)
+        self.search, self.repair_trigger = None, ""
+        self.last_forecast = ("", "", "")
+        rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
+        if search.purpose == "new":
+            # A new plan must come: search again after what runs now.
+            return rounds + self._again_from_committed(search, 0)
+        return rounds
+
     def _again_from_committed(
         self, search: Search, min_commit_steps: int, mode: str = G
     ) -> list[Message]:
@@ -516,25 +422,6 @@ class ContinualPlanner:
             return []  # the executing plan goes on; execution reports if it fails
         goal = self.request.goal if self.request is not None else []
         return [self._failure(search.request_id, reason, goal, search.blocked)]
-
-    def _blocked(self, goal: list[list[str]]) -> bool:
-        if not goal:
-            return False
-        try:
-            known = self.groundings.blocked(self.beliefs, goal)
-        except (GoalError, PlannerError):
-            return False
-        if known is not None:
-            return known
-        return self.transients.blocked(self.domain, self.beliefs, goal)
-
-    def _failure(
-        self, request_id: str, reason: str, goal: list[list[str]], blocked: bool | None = None
-    ) -> SearchStatus:
-        """A failed search, `blocked` if the goal is reachable once moving things move."""
-        if blocked is None:
-            blocked = self._blocked(goal)
-        return failure_status(self.agent, request_id, reason, blocked)
 
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line

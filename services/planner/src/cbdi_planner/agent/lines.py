@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 from msgspec.structs import replace
 
 from cbdi.wire.agent import PartialPlan
-from cbdi.wire.planner import SearchRound, SearchStatus
+from cbdi.wire.planner import ForecastReport, SearchRound, SearchStatus
 from cbdi_planner.agent.steps import plan_steps
-from cbdi_planner.continual import RoundDone, SearchThread
+from cbdi_planner.continual import Forecast, RoundDone, SearchThread
 from cbdi_planner.continual.improver import Improver
 from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan, ScheduledAction
@@ -27,6 +27,7 @@ __all__ = [
     "Search",
     "extend",
     "failure_status",
+    "forecast_report",
     "plan_prefix",
     "round_report",
     "search_status",
@@ -124,6 +125,21 @@ def round_report(agent: str, search: Search, r: RoundDone, now: float) -> Search
         seconds=r.seconds,
         best_h=r.best_h if r.best_h < 10**9 else -1,
         plan_actions=r.plan_actions,
+        time=now,
+    )
+
+
+def forecast_report(agent: str, line: Line, fc: Forecast, now: float) -> ForecastReport:
+    """The forecast `fc` of `line`'s plan, as the planner reports it."""
+    failed = line.step_ids[fc.failed] if fc.failed is not None else ""
+    done = fc.commitment.count
+    return ForecastReport(
+        agent=agent,
+        plan_id=line.plan_id,
+        kind=fc.kind,
+        failed_step=failed,
+        reason=fc.reason,
+        committed=line.step_ids[done - 1] if done else "",
         time=now,
     )
 

@@ -24,11 +24,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from cbdi_planner.best_first import best_first, improving
 from cbdi_planner.compression import needs_concurrency
 from cbdi_planner.continual.rounds import RoundBound
 from cbdi_planner.continual.thread import Event, ImprovedPlan, RoundDone
 from cbdi_planner.errors import SearchTimeout
 from cbdi_planner.expansion import Expander, Node
+from cbdi_planner.hill_climbing import enforced_hill_climbing
 from cbdi_planner.plan import plan_from_timeline
 from cbdi_planner.search import (
     IMPROVE_LIMIT,
@@ -37,9 +39,6 @@ from cbdi_planner.search import (
     SearchStats,
     _Clock,
     _first_plan,
-    best_first,
-    enforced_hill_climbing,
-    improving,
 )
 from cbdi_planner.state import State
 from cbdi_planner.task import Task

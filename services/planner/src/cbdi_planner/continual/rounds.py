@@ -9,7 +9,7 @@ only open nodes whose plan starts with the new root's plan are kept, and plan si
 count from the new root.
 
 With `agenda`, the greedy search climbs to the goal facts one at a time, as the offline
-planner's goal agenda does (`search.goal_agenda`): it aims at the goals reached so far
+planner's goal agenda does (`hill_climbing.goal_agenda`): it aims at the goals reached so far
 plus the nearest one left (lowest relaxed-graph layer), and once a state reaches that
 stage it aims at the next, climbing on from there. Each relaxed plan then stops at the
 stage's goals: cheap and short-sighted in the right way on a big map with many goals.
@@ -27,7 +27,7 @@ from typing import Any
 
 from cbdi_planner.core import compiled
 from cbdi_planner.expansion import Expander, Node
-from cbdi_planner.search import agenda_stage
+from cbdi_planner.hill_climbing import agenda_stage
 from cbdi_planner.state import State, is_goal
 from cbdi_planner.stn import END
 from cbdi_planner.task import Task
