@@ -79,6 +79,38 @@ def test_a_door_that_closes_during_a_drive_fails_it(tmp_path: Path) -> None:
     assert s.robots["robot1"].cell == (5, 2)
 
 
+@pytest.mark.parametrize("first", ["robot1", "robot2"])
+def test_two_drives_into_one_cell_in_one_epoch_go_by_name_not_by_arrival(
+    tmp_path: Path, first: str
+) -> None:
+    """In lockstep the requests of an epoch come in any order: they must not decide each
+    other. Both are accepted; at the epoch's end the first robot by name takes the cell
+    and the other's drive fails at once, its charge given back."""
+    text = MAP.read_text(encoding="utf-8")
+    path = tmp_path / "office.toml"
+    path.write_text(text, encoding="utf-8")
+    s = CourierSimulator(SimulatorConfig(map=str(path), agents=("robot1", "robot2"), seed=1))
+    s.robots["robot1"].cell, s.robots["robot2"].cell = (1, 4), (3, 4)
+    src = {"robot1": "c_1_4", "robot2": "c_3_4"}
+    order = [first, *(r for r in ("robot1", "robot2") if r != first)]
+    for n, robot in enumerate(order):
+        req = ActionRequest(
+            agent=robot,
+            action="drive",
+            request_id=f"{robot}-{n}",
+            args=[robot, src[robot], "c_2_4"],
+        )
+        assert s.request(req).accepted
+    result = s.step()
+    (lost,) = result.outcomes
+    assert (lost.agent, lost.status) == ("robot2", "failed")
+    assert "c_2_4 is not clear (robot1 drives there)" in lost.reason
+    assert s.robots["robot2"].battery == 20 and s.robots["robot2"].cell == (3, 4)
+    assert s.robots["robot2"].action is None
+    assert [o.agent for o in s.step().outcomes] == ["robot1"]
+    assert s.robots["robot1"].cell == (2, 4)
+
+
 def test_an_unknown_action_is_refused_naming_the_courier_actions(tmp_path: Path) -> None:
     s = sim(tmp_path)
     req = ActionRequest(agent="robot1", action="move", request_id="m", args=["robot1", "c_1_4"])

@@ -180,8 +180,9 @@ class CourierSimulator:
     def step(self) -> EpochResult:
         self.epoch += 1
         self.time = self.epoch * self.floor.epoch_duration
+        outcomes = self._settle_contests()
         self._close_doors()
-        outcomes = self._complete()
+        outcomes += self._complete()
         self._bring_back()
         self._roll_carts()
         return self._result(outcomes)
@@ -211,14 +212,53 @@ class CourierSimulator:
         )
 
     # -- actions --------------------------------------------------------------------------
-    def _occupied(self, cell: Cell) -> bool:
-        """A robot stands there or drives into it, or a cart stands there."""
+    def _occupied(self, cell: Cell, earlier_only: bool = False) -> bool:
+        """A robot stands there or drives into it, or a cart stands there; `earlier_only`:
+        only drives that began before this epoch count (a request's check: the requests
+        of one epoch come in any order, so they must not decide each other)."""
         for r in self.robots.values():
+            a = r.action
             if r.cell == cell or (
-                r.action and r.action.name == "drive" and r.action.target == cell
+                a
+                and a.name == "drive"
+                and a.target == cell
+                and not (earlier_only and a.starts_at >= self.time - _EPS)
             ):
                 return True
         return any(c.cell == cell for c in self.carts)
+
+    def _settle_contests(self) -> list[ActionOutcome]:
+        """Drives of the epoch just ended into one cell: the first robot by name takes
+        it, the others fail at once, their charge given back (in lockstep a run must not
+        depend on which request came first)."""
+        began = self.time - self.floor.epoch_duration
+        drives: dict[Cell, list[_Robot]] = {}
+        for r in sorted(self.robots.values(), key=lambda r: r.name):
+            a = r.action
+            if a and a.name == "drive" and a.target is not None and abs(a.starts_at - began) < _EPS:
+                drives.setdefault(a.target, []).append(r)
+        outcomes = []
+        for target, robots in drives.items():
+            for robot in robots[1:]:
+                action = robot.action
+                assert action is not None
+                robot.action = None
+                robot.battery += 1
+                robot.charged = robot.battery >= self.floor.battery
+                robot.count("failed")
+                why = f"{cell_name(target)} is not clear ({robots[0].name} drives there)"
+                outcomes.append(
+                    ActionOutcome(
+                        agent=robot.name,
+                        request_id=action.request_id,
+                        action=action.name,
+                        status="failed",
+                        reason=why,
+                        epoch=self.epoch,
+                        time=self.time,
+                    )
+                )
+        return outcomes
 
     def _check(self, robot: _Robot, req: ActionRequest) -> tuple[str, _Action | None]:
         name, args = req.action, tuple(req.args)
@@ -246,7 +286,7 @@ class CourierSimulator:
                     return f"{args[2]} is no closed door", None
             elif not self.open.get(dst, True):
                 return f"the door at {args[2]} is closed", None
-            elif self._occupied(dst):
+            elif self._occupied(dst, earlier_only=True):
                 return f"{args[2]} is not clear", None
             elif robot.battery < 1:
                 return f"{robot.name}'s battery is empty", None
