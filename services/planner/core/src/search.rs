@@ -436,9 +436,8 @@ impl Search {
         if remaining.len() < 2 {
             return None;
         }
-        let packed = state.packed();
         let graph = self.graph.get();
-        let levels = graph.levels(&packed, &state.open, state.til, &state.nums, &remaining)?;
+        let levels = graph.levels(&state.facts, &state.open, state.til, &state.nums, &remaining)?;
         let (_, nearest) = levels.iter().zip(&remaining).min()?;
         let mut stage: Vec<u32> = self
             .goal_bits
@@ -471,7 +470,7 @@ impl Search {
         let found =
             self.graph
                 .get()
-                .relaxed(&state.packed(), &state.open, state.til, &state.nums, &goals);
+                .relaxed(&state.facts, &state.open, state.til, &state.nums, &goals);
         let (h, helpful, h_time) = match found {
             Some((value, helpful, duration)) => (value as i64, helpful, duration),
             None => (INFINITE, Vec::new(), 0.0),
