@@ -103,7 +103,8 @@ pub(crate) struct Graph {
     free: Vec<u32>,
     til_ops: Vec<u32>,
     op_pre: Csr,
-    chained_end: HashMap<usize, usize>,
+    /// The chained end op of each action (-1: none).
+    chained_end: Vec<i32>,
     op_kind: Vec<u8>,
     op_action: Vec<usize>,
     op_add: Csr,
@@ -114,6 +115,22 @@ pub(crate) struct Graph {
     exact: bool,
     /// How many numeric variables the ops read or write (a state has at least these).
     vars: usize,
+}
+
+/// The facts of an exploration: each one's layer and achiever (-1: not reached), and
+/// those reached, in order, up to `tail`.
+struct Facts<'a> {
+    level: &'a mut [i32],
+    achiever: &'a mut [i32],
+    reached: &'a mut [u32],
+    tail: usize,
+}
+
+/// The op lists a layer's firing appends to.
+struct Lists<'a> {
+    ready: &'a mut Vec<u32>,
+    held: &'a mut Vec<u32>,
+    acting: &'a mut Vec<u32>,
 }
 
 /// What firing an op does (`RelaxedPlanGraph._fire`): numeric or not, the end op it
@@ -211,7 +228,7 @@ impl Graph {
             free: indices(rpg.getattr("free")?.extract()?)?,
             til_ops: indices(rpg.getattr("til_ops")?.extract()?)?,
             op_pre: Csr::new(&op_pre)?,
-            chained_end: rpg.getattr("chained_end")?.extract()?,
+            chained_end: chained(rpg.getattr("chained_end")?.extract()?, actions)?,
             op_kind,
             op_action,
             op_add: Csr::new(&op_add)?,
@@ -399,8 +416,14 @@ impl Graph {
             && self.users.all_below(ops)
             && self.counts.len() == ops
             && self.fire.iter().all(|r| r.then < ops as i32)
-            && self.fire.iter().all(|r| r.start <= r.split && r.split <= r.end)
-            && self.fire.last().is_none_or(|r| r.end as usize == self.adds.len())
+            && self
+                .fire
+                .iter()
+                .all(|r| r.start <= r.split && r.split <= r.end)
+            && self
+                .fire
+                .last()
+                .is_none_or(|r| r.end as usize == self.adds.len())
             && self.adds.iter().all(|&f| (f as usize) < self.size)
             && self.num_pre.len() == ops
             && self.num_eff.len() == ops
@@ -408,11 +431,8 @@ impl Graph {
             && self.op_pre.all_below(self.size)
             && self.free.iter().all(|&k| (k as usize) < ops)
             && self.til_ops.iter().all(|&k| (k as usize) < ops)
-            && self.chained_end.values().all(|&k| k < ops)
-            && self
-                .chained_end
-                .keys()
-                .all(|&a| fact_ok(&(self.pending + a)))
+            && self.chained_end.iter().all(|&k| k < ops as i32)
+            && fact_ok(&(self.pending + self.chained_end.len().saturating_sub(1)))
             && self.op_kind.len() == ops
             && self.op_action.len() == ops
             && self.op_add.len() == ops
@@ -518,40 +538,28 @@ impl Graph {
             due.append(waiting);
             due.append(ready);
             due.extend_from_slice(&zeroed[zeros_before..zeros]);
-            let mut fired = false;
             let next_level = depth + 1;
-            for &k in due.iter() {
-                let k = k as usize;
-                if op_level[k] >= 0 {
-                    continue;
-                }
-                let fire = self.fire[k];
-                if fire.numeric {
-                    let pre = &self.num_pre[k];
-                    if !pre.is_empty() && !pre.iter().all(|c| may_hold(c, lo, hi)) {
-                        held.push(k as u32);
-                        continue;
-                    }
-                    if !self.num_eff[k].is_empty() {
-                        acting.push(k as u32);
-                    }
-                }
-                op_level[k] = depth;
-                fired = true;
-                if fire.then >= 0 {
-                    ready.push(fire.then as u32);
-                }
-                let (live, quiet) = if everything {
-                    (self.op_add.get(k), &[][..])
-                } else {
-                    let (start, split, end) =
-                        (fire.start as usize, fire.split as usize, fire.end as usize);
-                    (&self.adds[start..split], &self.adds[split..end])
-                };
-                let at = (next_level, k as i32);
-                tail = reach(live, at, level, achiever, reached, tail);
-                reach_quietly(quiet, at, level, achiever);
-            }
+            let lists = Lists {
+                ready,
+                held,
+                acting,
+            };
+            let mut facts = Facts {
+                level,
+                achiever,
+                reached,
+                tail,
+            };
+            let fired = self.fire_layer(
+                due,
+                depth,
+                everything,
+                op_level,
+                &mut facts,
+                lists,
+                (lo, hi),
+            );
+            tail = facts.tail;
             if !fired {
                 return false;
             }
@@ -567,6 +575,66 @@ impl Graph {
         true
     }
 
+    /// Fire the ops `due` at layer `depth` that can fire (`_explore`'s inner loop):
+    /// whether one did. An op whose numeric condition cannot hold yet is `held`; one with
+    /// numeric effects is `acting`; the end op a start enables by itself is `ready`.
+    #[allow(clippy::too_many_arguments)]
+    fn fire_layer(
+        &self,
+        due: &[u32],
+        depth: i32,
+        everything: bool,
+        op_level: &mut [i32],
+        facts: &mut Facts<'_>,
+        lists: Lists<'_>,
+        (lo, hi): (&[f64], &[f64]),
+    ) -> bool {
+        let Lists {
+            ready,
+            held,
+            acting,
+        } = lists;
+        let (level, achiever, reached) =
+            (&mut *facts.level, &mut *facts.achiever, &mut *facts.reached);
+        let mut tail = facts.tail;
+        let mut fired = false;
+        let next_level = depth + 1;
+        for &k in due {
+            let k = k as usize;
+            if op_level[k] >= 0 {
+                continue;
+            }
+            let fire = &self.fire[k];
+            if fire.numeric {
+                let pre = &self.num_pre[k];
+                if !pre.is_empty() && !pre.iter().all(|c| may_hold(c, lo, hi)) {
+                    held.push(k as u32);
+                    continue;
+                }
+                if !self.num_eff[k].is_empty() {
+                    acting.push(k as u32);
+                }
+            }
+            op_level[k] = depth;
+            fired = true;
+            if fire.then >= 0 {
+                ready.push(fire.then as u32);
+            }
+            let (live, quiet) = if everything {
+                (self.op_add.get(k), &[][..])
+            } else {
+                let (start, split, end) =
+                    (fire.start as usize, fire.split as usize, fire.end as usize);
+                (&self.adds[start..split], &self.adds[split..end])
+            };
+            let at = (next_level, k as i32);
+            tail = reach(live, at, level, achiever, reached, tail);
+            reach_quietly(quiet, at, level, achiever);
+        }
+        facts.tail = tail;
+        fired
+    }
+
     /// `RelaxedPlanGraph._running_ends`: the counters of running actions' chained ends.
     fn running_ends(
         &self,
@@ -576,27 +644,36 @@ impl Graph {
         ready: &mut Vec<u32>,
     ) -> HashMap<u32, Vec<u32>> {
         let mut extra: HashMap<u32, Vec<u32>> = HashMap::new();
-        for a in open {
-            let Some(&k) = self.chained_end.get(a) else {
+        for &a in open {
+            let Some(k) = self
+                .chained_end
+                .get(a)
+                .and_then(|&k| usize::try_from(k).ok())
+            else {
                 continue;
             };
-            let need: Vec<u32> = self
-                .op_pre
-                .get(k)
-                .iter()
-                .copied()
-                .filter(|&f| level[f as usize] < 0)
-                .collect();
-            counts[k] = need.len() as i32;
-            if need.is_empty() {
+            let unmet = |f: &&u32| level[**f as usize] < 0;
+            let need = self.op_pre.get(k).iter().filter(unmet);
+            counts[k] = need.clone().count() as i32;
+            if counts[k] == 0 {
                 ready.push(k as u32);
             }
-            for f in need {
+            for &f in need {
                 extra.entry(f).or_default().push(k as u32);
             }
         }
         extra
     }
+}
+
+/// The chained end op of each of `actions` actions (-1: none) from a map.
+fn chained(ends: HashMap<usize, usize>, actions: usize) -> PyResult<Vec<i32>> {
+    let mut out = vec![-1; actions];
+    for (a, k) in ends {
+        let bad = || PyValueError::new_err(format!("chained end of unknown action {a}"));
+        *out.get_mut(a).ok_or_else(bad)? = i32::try_from(k).map_err(|_| bad())?;
+    }
+    Ok(out)
 }
 
 /// Count down the counters of `ops`: those that run out are written to `zeroed` from
@@ -656,8 +733,10 @@ fn words_of(bytes: &[u8]) -> Vec<u64> {
         .collect()
 }
 
-/// `values` as `size` times -1, in the memory it has.
+/// `values` as `size` times -1, in the memory it has (filled at once: a fill by
+/// `resize` writes one element at a time).
 fn reset(values: &mut Vec<i32>, size: usize) {
-    values.clear();
+    values.truncate(size);
     values.resize(size, -1);
+    values.fill(-1);
 }

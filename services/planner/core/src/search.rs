@@ -17,8 +17,8 @@ use crate::Touches;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
-use std::collections::{HashMap, VecDeque};
-use std::hash::{Hash, Hasher};
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::hash::{BuildHasherDefault, Hash, Hasher};
 use std::sync::Arc;
 
 /// `heuristic.INFINITE`: the value of a dead end.
@@ -33,7 +33,7 @@ type Estimate = (i64, Vec<(u8, usize)>, f64);
 /// continual search's rounds evaluate again states a round before had reached.
 #[derive(Default)]
 struct Known {
-    estimates: HashMap<Arc<State>, Estimate>,
+    estimates: StateMap<Estimate>,
     order: VecDeque<Arc<State>>,
 }
 
@@ -482,7 +482,13 @@ impl Search {
             return None;
         }
         let graph = self.graph.get();
-        let levels = graph.levels(&state.facts, &state.open, state.til, &state.nums, &remaining)?;
+        let levels = graph.levels(
+            &state.facts,
+            &state.open,
+            state.til,
+            &state.nums,
+            &remaining,
+        )?;
         let (_, nearest) = levels.iter().zip(&remaining).min()?;
         let mut stage: Vec<u32> = self
             .goal_bits
@@ -644,3 +650,35 @@ impl Search {
         self.evaluate(mv.state.clone(), running, schedule, line)
     }
 }
+
+/// A hasher for the search's own states (no outside input to guard against): a word at
+/// a time, multiplied and rotated (as rustc's FxHasher), much cheaper than SipHash on
+/// states of many words.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct StateHasher(u64);
+
+impl Hasher for StateHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn write_usize(&mut self, word: usize) {
+        self.write_u64(word as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+/// Sets and maps of states hashed by `StateHasher`.
+pub(crate) type States = HashSet<Arc<State>, BuildHasherDefault<StateHasher>>;
+type StateMap<V> = HashMap<Arc<State>, V, BuildHasherDefault<StateHasher>>;
