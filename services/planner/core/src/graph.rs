@@ -432,7 +432,8 @@ impl Graph {
             && self.free.iter().all(|&k| (k as usize) < ops)
             && self.til_ops.iter().all(|&k| (k as usize) < ops)
             && self.chained_end.iter().all(|&k| k < ops as i32)
-            && fact_ok(&(self.pending + self.chained_end.len().saturating_sub(1)))
+            && (self.chained_end.iter().enumerate())
+                .all(|(a, &k)| k < 0 || fact_ok(&(self.pending + a)))
             && self.op_kind.len() == ops
             && self.op_action.len() == ops
             && self.op_add.len() == ops
