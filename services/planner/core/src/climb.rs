@@ -4,10 +4,10 @@
 //! same nodes in the same order as the Python reference.
 
 use crate::schedule::Schedule;
-use crate::search::{Move, Node, Search, State, Stop, Ticker};
+use crate::search::{Move, Node, Search, States, Stop, Ticker};
 use crate::Touches;
 use std::cmp::{Ordering, Reverse};
-use std::collections::{BinaryHeap, HashSet, VecDeque};
+use std::collections::{BinaryHeap, VecDeque};
 use std::sync::Arc;
 
 /// `hill_climbing.PLATEAU`: expansions one climbing step may take.
@@ -61,7 +61,7 @@ fn climb(
     t: &mut Ticker,
     helpful_only: bool,
 ) -> Found {
-    let mut seen: HashSet<Arc<State>> = HashSet::from([current.state.clone()]);
+    let mut seen = States::from_iter([current.state.clone()]);
     let mut queue = VecDeque::from([current.clone()]);
     for _ in 0..PLATEAU {
         let Some(node) = queue.pop_front() else {
@@ -146,7 +146,7 @@ pub(crate) fn best_first(
         parent: root,
         mv: None,
     }));
-    let mut closed: HashSet<Arc<State>> = HashSet::new();
+    let mut closed = States::default();
     let (mut counter, mut turn, mut boost) = (0u64, 0usize, 0u32);
     while !lists[0].is_empty() || !lists[1].is_empty() {
         turn = next_list(&lists, turn, boost);
@@ -200,12 +200,7 @@ pub(crate) fn best_first(
 
 /// `best_first._take`: the node of an entry, scheduled and evaluated now (None: closed,
 /// inconsistent or dead).
-fn take(
-    s: &mut Search,
-    snaps: &[Touches],
-    entry: &Entry,
-    closed: &HashSet<Arc<State>>,
-) -> Option<Arc<Node>> {
+fn take(s: &mut Search, snaps: &[Touches], entry: &Entry, closed: &States) -> Option<Arc<Node>> {
     let parent = &entry.parent;
     let Some(mv) = &entry.mv else {
         return (!closed.contains(&parent.state)).then(|| parent.clone());

@@ -58,6 +58,13 @@ pub struct Marks {
     sought: Vec<usize>,
 }
 
+/// `marks` as `size` times false, in the memory it has (filled at once).
+fn unmark(marks: &mut Vec<bool>, size: usize) {
+    marks.truncate(size);
+    marks.resize(size, false);
+    marks.fill(false);
+}
+
 /// Extract the relaxed plan of `goals` from the layers of an exploration.
 pub fn extract(
     ops: &Ops<'_>,
@@ -89,10 +96,8 @@ pub fn extract(
         buckets[level[g] as usize].add(g);
     }
     chosen.clear();
-    taken.clear();
-    taken.resize(ops.kind.len(), false);
-    done.clear();
-    done.resize(level.len(), false);
+    unmark(taken, ops.kind.len());
+    unmark(done, level.len());
     sought.clear();
     let (mut count, mut duration) = (0usize, 0.0f64);
     for depth in (1..=top).rev() {

@@ -64,7 +64,13 @@ pub(crate) struct Layers {
 struct Scratch {
     layers: Layers,
     counts: Vec<i32>,
-    frontier: Vec<u32>,
+    /// Every fact reached, in the order reached (a layer's frontier is a run of it),
+    /// with one slot more: a fact is written at the end unconditionally and kept only
+    /// if new, so that the hot loops need no unpredictable branch.
+    reached: Vec<u32>,
+    /// Every op whose counter ran out, in that order (each runs out once), and a slot
+    /// more, as `reached`.
+    zeroed: Vec<u32>,
     ready: Vec<u32>,
     waiting: Vec<u32>,
     due: Vec<u32>,
@@ -88,19 +94,17 @@ pub(crate) struct Graph {
     /// The ops counting each fact among their conditions.
     users: Csr,
     counts: Vec<i32>,
-    /// What firing op k does (`RelaxedPlanGraph._fire`): numeric or not, the end op it
-    /// enables by itself (-1: none), the facts it adds that some op counts (`live`) and
-    /// the others (`quiet`).
-    numeric: Vec<bool>,
-    then: Vec<i32>,
-    live: Csr,
-    quiet: Csr,
+    /// What firing op k does (`RelaxedPlanGraph._fire`), in one record per op.
+    fire: Vec<Fire>,
+    /// The facts the ops add: op k's `live` ones, then its `quiet` ones (`Fire`).
+    adds: Vec<u32>,
     num_pre: Vec<Vec<Cond>>,
     num_eff: Vec<Vec<Assign>>,
     free: Vec<u32>,
     til_ops: Vec<u32>,
     op_pre: Csr,
-    chained_end: HashMap<usize, usize>,
+    /// The chained end op of each action (-1: none).
+    chained_end: Vec<i32>,
     op_kind: Vec<u8>,
     op_action: Vec<usize>,
     op_add: Csr,
@@ -111,6 +115,34 @@ pub(crate) struct Graph {
     exact: bool,
     /// How many numeric variables the ops read or write (a state has at least these).
     vars: usize,
+}
+
+/// The facts of an exploration: each one's layer and achiever (-1: not reached), and
+/// those reached, in order, up to `tail`.
+struct Facts<'a> {
+    level: &'a mut [i32],
+    achiever: &'a mut [i32],
+    reached: &'a mut [u32],
+    tail: usize,
+}
+
+/// The op lists a layer's firing appends to.
+struct Lists<'a> {
+    ready: &'a mut Vec<u32>,
+    held: &'a mut Vec<u32>,
+    acting: &'a mut Vec<u32>,
+}
+
+/// What firing an op does (`RelaxedPlanGraph._fire`): numeric or not, the end op it
+/// enables by itself (-1: none), and where its added facts lie in `Graph::adds`: those
+/// some op counts (`live`, `start..split`), then the others (`quiet`, `split..end`).
+#[derive(Clone, Copy)]
+struct Fire {
+    then: i32,
+    start: u32,
+    split: u32,
+    end: u32,
+    numeric: bool,
 }
 
 fn indices(list: Vec<usize>) -> PyResult<Vec<u32>> {
@@ -144,15 +176,22 @@ impl Graph {
             start_op[a] = k as i64;
         }
         let fires: Vec<(bool, i64, Vec<usize>, Vec<usize>)> = rpg.getattr("_fire")?.extract()?;
-        let ops = fires.len();
-        let mut numeric = Vec::with_capacity(ops);
-        let mut then = Vec::with_capacity(ops);
-        let (mut live, mut quiet) = (Vec::with_capacity(ops), Vec::with_capacity(ops));
-        for (is_numeric, next, l, q) in fires {
-            numeric.push(is_numeric);
-            then.push(i32::try_from(next).map_err(|_| PyValueError::new_err("bad op"))?);
-            live.push(l);
-            quiet.push(q);
+        let bad = || PyValueError::new_err("bad op");
+        let mut fire = Vec::with_capacity(fires.len());
+        let mut adds = Vec::new();
+        let at = |adds: &Vec<u32>| u32::try_from(adds.len()).map_err(|_| bad());
+        for (numeric, next, live, quiet) in fires {
+            let start = at(&adds)?;
+            adds.extend(indices(live)?);
+            let split = at(&adds)?;
+            adds.extend(indices(quiet)?);
+            fire.push(Fire {
+                then: i32::try_from(next).map_err(|_| bad())?,
+                start,
+                split,
+                end: at(&adds)?,
+                numeric,
+            });
         }
         let mut num_pre = Vec::new();
         for conds in rpg.getattr("op_num_pre")?.try_iter()? {
@@ -182,16 +221,14 @@ impl Graph {
             pending,
             users: Csr::new(&users)?,
             counts,
-            numeric,
-            then,
-            live: Csr::new(&live)?,
-            quiet: Csr::new(&quiet)?,
+            fire,
+            adds,
             num_pre,
             num_eff,
             free: indices(rpg.getattr("free")?.extract()?)?,
             til_ops: indices(rpg.getattr("til_ops")?.extract()?)?,
             op_pre: Csr::new(&op_pre)?,
-            chained_end: rpg.getattr("chained_end")?.extract()?,
+            chained_end: chained(rpg.getattr("chained_end")?.extract()?, actions)?,
             op_kind,
             op_action,
             op_add: Csr::new(&op_add)?,
@@ -234,7 +271,7 @@ impl Graph {
         goals: Vec<usize>,
     ) -> PyResult<Option<(Vec<i64>, Vec<i64>, Vec<i64>)>> {
         self.check_state(facts, &open, &goals, &nums)?;
-        let facts = facts.to_vec();
+        let facts = words_of(facts);
         Ok(py.detach(move || {
             SCRATCH.with(|cell| {
                 let s = &mut *cell.borrow_mut();
@@ -265,7 +302,7 @@ impl Graph {
         goals: Vec<usize>,
     ) -> PyResult<Option<Relaxed>> {
         self.check_state(facts, &open, &goals, &nums)?;
-        let facts = facts.to_vec();
+        let facts = words_of(facts);
         Ok(py.detach(move || {
             SCRATCH.with(|cell| {
                 let s = &mut *cell.borrow_mut();
@@ -292,7 +329,7 @@ impl Graph {
     /// `estimate` for the compiled search (a state it made, so not checked).
     pub(crate) fn relaxed(
         &self,
-        facts: &[u8],
+        facts: &[u64],
         open: &[usize],
         til: usize,
         nums: &[f64],
@@ -320,7 +357,7 @@ impl Graph {
     /// `RelaxedPlanGraph.levels`: the first layer of each of `wanted` (None: one never).
     pub(crate) fn levels(
         &self,
-        facts: &[u8],
+        facts: &[u64],
         open: &[usize],
         til: usize,
         nums: &[f64],
@@ -373,28 +410,30 @@ impl Graph {
     }
 
     fn check(&self) -> PyResult<()> {
-        let ops = self.numeric.len();
+        let ops = self.fire.len();
         let fact_ok = |f: &usize| *f < self.size;
         let ok = self.users.len() == self.size
             && self.users.all_below(ops)
             && self.counts.len() == ops
-            && self.then.len() == ops
-            && self.then.iter().all(|&k| k < ops as i32)
-            && self.live.len() == ops
-            && self.live.all_below(self.size)
-            && self.quiet.len() == ops
-            && self.quiet.all_below(self.size)
+            && self.fire.iter().all(|r| r.then < ops as i32)
+            && self
+                .fire
+                .iter()
+                .all(|r| r.start <= r.split && r.split <= r.end)
+            && self
+                .fire
+                .last()
+                .is_none_or(|r| r.end as usize == self.adds.len())
+            && self.adds.iter().all(|&f| (f as usize) < self.size)
             && self.num_pre.len() == ops
             && self.num_eff.len() == ops
             && self.op_pre.len() == ops
             && self.op_pre.all_below(self.size)
             && self.free.iter().all(|&k| (k as usize) < ops)
             && self.til_ops.iter().all(|&k| (k as usize) < ops)
-            && self.chained_end.values().all(|&k| k < ops)
-            && self
-                .chained_end
-                .keys()
-                .all(|&a| fact_ok(&(self.pending + a)))
+            && self.chained_end.iter().all(|&k| k < ops as i32)
+            && (self.chained_end.iter().enumerate())
+                .all(|(a, &k)| k < 0 || fact_ok(&(self.pending + a)))
             && self.op_kind.len() == ops
             && self.op_action.len() == ops
             && self.op_add.len() == ops
@@ -411,11 +450,11 @@ impl Graph {
     }
 
     /// Explore layer by layer until every goal is reached (false: one never is), into
-    /// `s.layers`.
+    /// `s.layers`. `facts`: the state's, as words of bits.
     fn run(
         &self,
         s: &mut Scratch,
-        facts: &[u8],
+        facts: &[u64],
         open: &[usize],
         til: usize,
         nums: &[f64],
@@ -424,7 +463,8 @@ impl Graph {
         let Scratch {
             layers,
             counts,
-            frontier,
+            reached,
+            zeroed,
             ready,
             waiting,
             due,
@@ -440,21 +480,28 @@ impl Graph {
             achiever,
             op_level,
         } = layers;
+        let ops = self.fire.len();
         reset(level, self.size);
         reset(achiever, self.size);
-        reset(op_level, self.numeric.len());
+        reset(op_level, ops);
         counts.clear();
         counts.extend_from_slice(&self.counts);
-        frontier.clear();
-        for (i, &byte) in facts.iter().enumerate() {
-            let mut bits = byte;
+        reached.resize(self.size + 1, 0);
+        zeroed.resize(ops + 1, 0);
+        let mut tail = 0; // facts reached so far
+        for (i, &word) in facts.iter().enumerate() {
+            let mut bits = word;
             while bits != 0 {
-                frontier.push((i * 8) as u32 + bits.trailing_zeros());
+                reached[tail] = (i * 64) as u32 + bits.trailing_zeros();
+                tail += 1;
                 bits &= bits - 1;
             }
         }
-        frontier.extend(open.iter().map(|a| (self.pending + a) as u32));
-        for &f in frontier.iter() {
+        for &a in open {
+            reached[tail] = (self.pending + a) as u32;
+            tail += 1;
+        }
+        for &f in &reached[..tail] {
             level[f as usize] = 0;
         }
         missing.clear();
@@ -471,78 +518,49 @@ impl Graph {
         let extra = self.running_ends(open, level, counts, ready);
         let everything = !extra.is_empty();
         waiting.clear();
+        let (mut head, mut zeros) = (0, 0);
         let mut depth = 0i32;
         while !missing.is_empty() {
-            for &f in frontier.iter() {
-                for &k in self.users.get(f as usize) {
-                    let count = &mut counts[k as usize];
-                    *count -= 1;
-                    if *count == 0 {
-                        ready.push(k);
-                    }
-                }
+            // The frontier's users, in its order: the ops whose counters run out join
+            // `zeroed` (the slot after the last is written, and kept only if so).
+            let zeros_before = zeros;
+            for &f in &reached[head..tail] {
+                zeros = count_down(self.users.get(f as usize), counts, zeroed, zeros);
                 if everything {
                     if let Some(ks) = extra.get(&f) {
-                        for &k in ks {
-                            let count = &mut counts[k as usize];
-                            *count -= 1;
-                            if *count == 0 {
-                                ready.push(k);
-                            }
-                        }
+                        zeros = count_down(ks, counts, zeroed, zeros);
                     }
                 }
             }
+            head = tail;
             held.clear();
             acting.clear();
             due.clear();
             due.append(waiting);
             due.append(ready);
-            frontier.clear();
-            let mut fired = false;
+            due.extend_from_slice(&zeroed[zeros_before..zeros]);
             let next_level = depth + 1;
-            for &k in due.iter() {
-                let k = k as usize;
-                if op_level[k] >= 0 {
-                    continue;
-                }
-                if self.numeric[k] {
-                    let pre = &self.num_pre[k];
-                    if !pre.is_empty() && !pre.iter().all(|c| may_hold(c, lo, hi)) {
-                        held.push(k as u32);
-                        continue;
-                    }
-                    if !self.num_eff[k].is_empty() {
-                        acting.push(k as u32);
-                    }
-                }
-                op_level[k] = depth;
-                fired = true;
-                let then = self.then[k];
-                if then >= 0 {
-                    ready.push(then as u32);
-                }
-                let (live, quiet): (&[u32], &[u32]) = if everything {
-                    (self.op_add.get(k), &[])
-                } else {
-                    (self.live.get(k), self.quiet.get(k))
-                };
-                for &f in live {
-                    let f = f as usize;
-                    if level[f] < 0 {
-                        level[f] = next_level;
-                        achiever[f] = k as i32;
-                        frontier.push(f as u32);
-                    }
-                }
-                for &f in quiet {
-                    let f = f as usize;
-                    if level[f] < 0 {
-                        level[f] = next_level;
-                        achiever[f] = k as i32;
-                    }
-                }
-            }
+            let lists = Lists {
+                ready,
+                held,
+                acting,
+            };
+            let mut facts = Facts {
+                level,
+                achiever,
+                reached,
+                tail,
+            };
+            let fired = self.fire_layer(
+                due,
+                depth,
+                everything,
+                op_level,
+                &mut facts,
+                lists,
+                (lo, hi),
+            );
+            tail = facts.tail;
             if !fired {
                 return false;
             }
@@ -558,6 +576,66 @@ impl Graph {
         true
     }
 
+    /// Fire the ops `due` at layer `depth` that can fire (`_explore`'s inner loop):
+    /// whether one did. An op whose numeric condition cannot hold yet is `held`; one with
+    /// numeric effects is `acting`; the end op a start enables by itself is `ready`.
+    #[allow(clippy::too_many_arguments)]
+    fn fire_layer(
+        &self,
+        due: &[u32],
+        depth: i32,
+        everything: bool,
+        op_level: &mut [i32],
+        facts: &mut Facts<'_>,
+        lists: Lists<'_>,
+        (lo, hi): (&[f64], &[f64]),
+    ) -> bool {
+        let Lists {
+            ready,
+            held,
+            acting,
+        } = lists;
+        let (level, achiever, reached) =
+            (&mut *facts.level, &mut *facts.achiever, &mut *facts.reached);
+        let mut tail = facts.tail;
+        let mut fired = false;
+        let next_level = depth + 1;
+        for &k in due {
+            let k = k as usize;
+            if op_level[k] >= 0 {
+                continue;
+            }
+            let fire = &self.fire[k];
+            if fire.numeric {
+                let pre = &self.num_pre[k];
+                if !pre.is_empty() && !pre.iter().all(|c| may_hold(c, lo, hi)) {
+                    held.push(k as u32);
+                    continue;
+                }
+                if !self.num_eff[k].is_empty() {
+                    acting.push(k as u32);
+                }
+            }
+            op_level[k] = depth;
+            fired = true;
+            if fire.then >= 0 {
+                ready.push(fire.then as u32);
+            }
+            let (live, quiet) = if everything {
+                (self.op_add.get(k), &[][..])
+            } else {
+                let (start, split, end) =
+                    (fire.start as usize, fire.split as usize, fire.end as usize);
+                (&self.adds[start..split], &self.adds[split..end])
+            };
+            let at = (next_level, k as i32);
+            tail = reach(live, at, level, achiever, reached, tail);
+            reach_quietly(quiet, at, level, achiever);
+        }
+        facts.tail = tail;
+        fired
+    }
+
     /// `RelaxedPlanGraph._running_ends`: the counters of running actions' chained ends.
     fn running_ends(
         &self,
@@ -567,22 +645,21 @@ impl Graph {
         ready: &mut Vec<u32>,
     ) -> HashMap<u32, Vec<u32>> {
         let mut extra: HashMap<u32, Vec<u32>> = HashMap::new();
-        for a in open {
-            let Some(&k) = self.chained_end.get(a) else {
+        for &a in open {
+            let Some(k) = self
+                .chained_end
+                .get(a)
+                .and_then(|&k| usize::try_from(k).ok())
+            else {
                 continue;
             };
-            let need: Vec<u32> = self
-                .op_pre
-                .get(k)
-                .iter()
-                .copied()
-                .filter(|&f| level[f as usize] < 0)
-                .collect();
-            counts[k] = need.len() as i32;
-            if need.is_empty() {
+            let unmet = |f: &&u32| level[**f as usize] < 0;
+            let need = self.op_pre.get(k).iter().filter(unmet);
+            counts[k] = need.clone().count() as i32;
+            if counts[k] == 0 {
                 ready.push(k as u32);
             }
-            for f in need {
+            for &f in need {
                 extra.entry(f).or_default().push(k as u32);
             }
         }
@@ -590,8 +667,77 @@ impl Graph {
     }
 }
 
-/// `values` as `size` times -1, in the memory it has.
+/// The chained end op of each of `actions` actions (-1: none) from a map.
+fn chained(ends: HashMap<usize, usize>, actions: usize) -> PyResult<Vec<i32>> {
+    let mut out = vec![-1; actions];
+    for (a, k) in ends {
+        let bad = || PyValueError::new_err(format!("chained end of unknown action {a}"));
+        *out.get_mut(a).ok_or_else(bad)? = i32::try_from(k).map_err(|_| bad())?;
+    }
+    Ok(out)
+}
+
+/// Count down the counters of `ops`: those that run out are written to `zeroed` from
+/// `zeros` on; the new end of `zeroed`. (Each op is written to the slot after the last,
+/// and kept only if its counter ran out: no branch the processor could not predict.)
+fn count_down(ops: &[u32], counts: &mut [i32], zeroed: &mut [u32], mut zeros: usize) -> usize {
+    for &k in ops {
+        let count = &mut counts[k as usize];
+        *count -= 1;
+        zeroed[zeros] = k;
+        zeros += usize::from(*count == 0);
+    }
+    zeros
+}
+
+/// Give the facts `adds` not reached yet layer and achiever `at`, and append them to
+/// `reached` from `tail` on; the new end of `reached`. (Without a branch, as
+/// `count_down`.)
+fn reach(
+    adds: &[u32],
+    at: (i32, i32),
+    level: &mut [i32],
+    achiever: &mut [i32],
+    reached: &mut [u32],
+    mut tail: usize,
+) -> usize {
+    for &f in adds {
+        let (old, first) = (level[f as usize], achiever[f as usize]);
+        let new = old < 0;
+        level[f as usize] = if new { at.0 } else { old };
+        achiever[f as usize] = if new { at.1 } else { first };
+        reached[tail] = f;
+        tail += usize::from(new);
+    }
+    tail
+}
+
+/// `reach` for facts no op counts: they need no frontier.
+fn reach_quietly(adds: &[u32], at: (i32, i32), level: &mut [i32], achiever: &mut [i32]) {
+    for &f in adds {
+        let (old, first) = (level[f as usize], achiever[f as usize]);
+        let new = old < 0;
+        level[f as usize] = if new { at.0 } else { old };
+        achiever[f as usize] = if new { at.1 } else { first };
+    }
+}
+
+/// Little-endian bytes of bits as words.
+fn words_of(bytes: &[u8]) -> Vec<u64> {
+    bytes
+        .chunks(8)
+        .map(|chunk| {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            u64::from_le_bytes(word)
+        })
+        .collect()
+}
+
+/// `values` as `size` times -1, in the memory it has (filled at once: a fill by
+/// `resize` writes one element at a time).
 fn reset(values: &mut Vec<i32>, size: usize) {
-    values.clear();
+    values.truncate(size);
     values.resize(size, -1);
+    values.fill(-1);
 }

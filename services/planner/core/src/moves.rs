@@ -290,7 +290,7 @@ impl Moves {
         steps: &[Scheduled],
         epsilon: f64,
     ) -> Option<Schedule> {
-        let mut out = net.clone();
+        let mut out = net.fork(steps.len());
         for p in steps {
             let ends: Vec<(usize, usize)> = p
                 .running

@@ -17,6 +17,8 @@ pub struct PySet {
     table: Vec<usize>,
     mask: usize,
     used: usize,
+    /// The memory of the table before the last rebuild, for the next one.
+    spare: Vec<usize>,
 }
 
 impl Default for PySet {
@@ -31,6 +33,7 @@ impl PySet {
             table: vec![EMPTY; 8],
             mask: 7,
             used: 0,
+            spare: Vec::new(),
         }
     }
 
@@ -84,11 +87,15 @@ impl PySet {
         while size <= least {
             size <<= 1;
         }
-        let old = std::mem::replace(&mut self.table, vec![EMPTY; size]);
+        let mut old = std::mem::take(&mut self.spare);
+        old.clear();
+        old.resize(size, EMPTY);
+        std::mem::swap(&mut self.table, &mut old);
         self.mask = size - 1;
-        for key in old.into_iter().filter(|&k| k != EMPTY) {
+        for &key in old.iter().filter(|&&k| k != EMPTY) {
             Self::insert(&mut self.table, self.mask, key);
         }
+        self.spare = old;
     }
 
     /// The keys in CPython's iteration order.

@@ -8,12 +8,12 @@
 //! reference.
 
 use crate::schedule::END;
-use crate::search::{extends, Node, Search, SearchNode};
+use crate::search::{extends, Node, Search, SearchNode, States};
 use crate::Touches;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashSet, VecDeque};
+use std::collections::{BinaryHeap, VecDeque};
 use std::sync::Arc;
 
 /// An `NG` open-list entry: `(h, steps, tie-break)` and the node.
@@ -68,7 +68,7 @@ pub struct Rounds {
     open: BinaryHeap<Reverse<Open>>,
     queue: VecDeque<Arc<Node>>,
     current: Arc<Node>,
-    closed: HashSet<Arc<crate::search::State>>,
+    closed: States,
     counter: u64,
     best: Arc<Node>,
 }
@@ -98,7 +98,7 @@ impl Rounds {
             open: BinaryHeap::new(),
             queue: VecDeque::new(),
             current: root.clone(),
-            closed: HashSet::new(),
+            closed: States::default(),
             counter: 0,
             best: root.clone(),
         };
@@ -276,7 +276,7 @@ impl Rounds {
         self.current = node.clone();
         self.best = node.clone();
         self.queue.clear();
-        self.closed = HashSet::from([node.state.clone()]);
+        self.closed = States::from_iter([node.state.clone()]);
         node
     }
 

@@ -17,6 +17,8 @@ pub const END: u8 = 1;
 pub const TIL: u8 = 3;
 const TOL: f64 = 1e-9;
 const CHUNK: usize = 16;
+/// Room for edges a copied chunk gets (a step has a few incoming edges, mostly).
+const EDGES_MORE: usize = 16;
 
 /// One step: what `stn.Step` holds, its snap code, and where its incoming edges end in
 /// its chunk's `edges`.
@@ -36,10 +38,21 @@ struct Row {
 
 /// Up to `CHUNK` consecutive steps and their incoming edges, in two arrays (a copy of
 /// the last chunk, when a child appends to it, is two allocations).
-#[derive(Clone)]
 struct Chunk {
     rows: Vec<Row>,
     edges: Vec<(usize, f64)>,
+}
+
+impl Clone for Chunk {
+    /// A copy with room for a chunk's rows and some edges more: a copy is made to be
+    /// appended to.
+    fn clone(&self) -> Self {
+        let mut rows = Vec::with_capacity(CHUNK);
+        rows.extend_from_slice(&self.rows);
+        let mut edges = Vec::with_capacity(self.edges.len() + EDGES_MORE);
+        edges.extend_from_slice(&self.edges);
+        Chunk { rows, edges }
+    }
 }
 
 impl Chunk {
@@ -180,6 +193,19 @@ impl Schedule {
         self.times.len()
     }
 
+    /// A copy with room for `steps` steps more.
+    pub(crate) fn fork(&self, steps: usize) -> Schedule {
+        let mut chunks = Vec::with_capacity(self.chunks.len() + 1);
+        chunks.extend_from_slice(&self.chunks);
+        let mut times = Vec::with_capacity(self.times.len() + steps);
+        times.extend_from_slice(&self.times);
+        Schedule {
+            chunks,
+            times,
+            span: self.span,
+        }
+    }
+
     fn chunk(&self, k: usize) -> (&Chunk, usize) {
         (&self.chunks[k / CHUNK], k % CHUNK)
     }
@@ -200,9 +226,16 @@ impl Schedule {
 
     /// The steps (positions) that interfere with happening `with` (`stn._interfering`).
     fn interfering(&self, snaps: &[Touches], with: usize) -> Vec<usize> {
+        let mut out = Vec::new();
+        self.each_interfering(snaps, with, |k| out.push(k));
+        out
+    }
+
+    /// Call `found` with each step (position, in order) that interferes with happening
+    /// `with`.
+    fn each_interfering(&self, snaps: &[Touches], with: usize, mut found: impl FnMut(usize)) {
         let b = &snaps[with];
         let g = &b.folds;
-        let mut out = Vec::new();
         for (i, chunk) in self.chunks.iter().enumerate() {
             for (j, row) in chunk.rows.iter().enumerate() {
                 let f = &row.folds;
@@ -213,11 +246,10 @@ impl Schedule {
                     | (f[5] & g[6])
                     | (f[4] & g[5]);
                 if maybe != 0 && interferes(&snaps[row.code], b) {
-                    out.push(i * CHUNK + j);
+                    found(i * CHUNK + j);
                 }
             }
         }
-        out
     }
 
     /// Step k's `(kind, action, partner, low, high)`.
@@ -263,11 +295,8 @@ impl Schedule {
             ..
         } = *step;
         let n = self.len();
-        let mut incoming: Vec<(usize, f64)> = self
-            .interfering(snaps, code)
-            .into_iter()
-            .map(|i| (i, eps))
-            .collect();
+        let mut incoming: Vec<(usize, f64)> = Vec::new();
+        self.each_interfering(snaps, code, |i| incoming.push((i, eps)));
         if kind == END {
             incoming.push((partner as usize, low));
         }
@@ -287,11 +316,12 @@ impl Schedule {
                 if bound == f64::INFINITY {
                     continue;
                 }
-                let after: Vec<usize> = self
-                    .interfering(snaps, end_code)
-                    .into_iter()
-                    .filter(|&k| k != start)
-                    .collect();
+                let mut after: Vec<usize> = Vec::new();
+                self.each_interfering(snaps, end_code, |k| {
+                    if k != start {
+                        after.push(k);
+                    }
+                });
                 if !after.is_empty() {
                     waits.push(Wait {
                         start,

@@ -17,11 +17,46 @@ use crate::Touches;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
-use std::hash::{Hash, Hasher};
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::hash::{BuildHasherDefault, Hash, Hasher};
 use std::sync::Arc;
 
 /// `heuristic.INFINITE`: the value of a dead end.
 pub(crate) const INFINITE: i64 = 1 << 30;
+/// `heuristic.KNOWN`: estimates remembered (the oldest forgotten first).
+const KNOWN: usize = 4096;
+
+/// A state's heuristic estimate: value, helpful happenings (sorted), relaxed duration.
+type Estimate = (i64, Vec<(u8, usize)>, f64);
+
+/// The latest estimates under the current aim (`RelaxedPlanGraph._known`): a
+/// continual search's rounds evaluate again states a round before had reached.
+#[derive(Default)]
+struct Known {
+    estimates: StateMap<Estimate>,
+    order: VecDeque<Arc<State>>,
+}
+
+impl Known {
+    fn get(&self, state: &State) -> Option<&Estimate> {
+        self.estimates.get(state)
+    }
+
+    fn remember(&mut self, state: Arc<State>, estimate: Estimate) {
+        if self.order.len() >= KNOWN {
+            if let Some(oldest) = self.order.pop_front() {
+                self.estimates.remove(&oldest);
+            }
+        }
+        self.order.push_back(state.clone());
+        self.estimates.insert(state, estimate);
+    }
+
+    fn forget(&mut self) {
+        self.estimates.clear();
+        self.order.clear();
+    }
+}
 
 /// A search state (`cbdi_planner.state.State`); equal as `State.key()`s are.
 pub(crate) struct State {
@@ -238,6 +273,10 @@ pub struct Search {
     /// The heuristic's goal facts (`RelaxedPlanGraph.goal`).
     aim: Vec<usize>,
     goal_bits: Vec<usize>,
+    /// The goals of the last evaluation (`aim` and the running actions' ends), kept
+    /// for the memory.
+    goals: Vec<usize>,
+    known: Known,
     compress: bool,
     pub(crate) epsilon: f64,
     words: usize,
@@ -276,6 +315,8 @@ impl Search {
             subgoal: None,
             aim: goal_bits.clone(),
             goal_bits,
+            goals: Vec::new(),
+            known: Known::default(),
             compress,
             epsilon,
             words,
@@ -403,10 +444,14 @@ impl Search {
 
 impl Search {
     pub(crate) fn set_aim(&mut self, subgoal: Option<Vec<u32>>) {
-        self.aim = match &subgoal {
+        let aim = match &subgoal {
             Some(bits) => bits.iter().map(|&f| f as usize).collect(),
             None => self.goal_bits.clone(),
         };
+        if aim != self.aim {
+            self.known.forget(); // estimates under another aim
+        }
+        self.aim = aim;
         self.subgoal = subgoal;
     }
 
@@ -436,9 +481,14 @@ impl Search {
         if remaining.len() < 2 {
             return None;
         }
-        let packed = state.packed();
         let graph = self.graph.get();
-        let levels = graph.levels(&packed, &state.open, state.til, &state.nums, &remaining)?;
+        let levels = graph.levels(
+            &state.facts,
+            &state.open,
+            state.til,
+            &state.nums,
+            &remaining,
+        )?;
         let (_, nearest) = levels.iter().zip(&remaining).min()?;
         let mut stage: Vec<u32> = self
             .goal_bits
@@ -465,16 +515,13 @@ impl Search {
         line: Arc<Line>,
     ) -> Node {
         self.evaluated += 1;
-        let ended = self.graph.get().pending() + self.moves.get().actions();
-        let mut goals = self.aim.clone();
-        goals.extend(state.open.iter().map(|a| ended + a));
-        let found =
-            self.graph
-                .get()
-                .relaxed(&state.packed(), &state.open, state.til, &state.nums, &goals);
-        let (h, helpful, h_time) = match found {
-            Some((value, helpful, duration)) => (value as i64, helpful, duration),
-            None => (INFINITE, Vec::new(), 0.0),
+        let (h, helpful, h_time) = match self.known.get(&state) {
+            Some(known) => known.clone(),
+            None => {
+                let estimate = self.estimate(&state);
+                self.known.remember(state.clone(), estimate.clone());
+                estimate
+            }
         };
         Node {
             state,
@@ -484,6 +531,24 @@ impl Search {
             h,
             helpful,
             h_time,
+        }
+    }
+
+    /// The heuristic estimate of `state` under the current aim.
+    fn estimate(&mut self, state: &State) -> Estimate {
+        let ended = self.graph.get().pending() + self.moves.get().actions();
+        let mut goals = std::mem::take(&mut self.goals);
+        goals.clear();
+        goals.extend_from_slice(&self.aim);
+        goals.extend(state.open.iter().map(|a| ended + a));
+        let found =
+            self.graph
+                .get()
+                .relaxed(&state.facts, &state.open, state.til, &state.nums, &goals);
+        self.goals = goals;
+        match found {
+            Some((value, helpful, duration)) => (value as i64, helpful, duration),
+            None => (INFINITE, Vec::new(), 0.0),
         }
     }
 
@@ -585,3 +650,35 @@ impl Search {
         self.evaluate(mv.state.clone(), running, schedule, line)
     }
 }
+
+/// A hasher for the search's own states (no outside input to guard against): a word at
+/// a time, multiplied and rotated (as rustc's FxHasher), much cheaper than SipHash on
+/// states of many words.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct StateHasher(u64);
+
+impl Hasher for StateHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn write_usize(&mut self, word: usize) {
+        self.write_u64(word as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+/// Sets and maps of states hashed by `StateHasher`.
+pub(crate) type States = HashSet<Arc<State>, BuildHasherDefault<StateHasher>>;
+type StateMap<V> = HashMap<Arc<State>, V, BuildHasherDefault<StateHasher>>;

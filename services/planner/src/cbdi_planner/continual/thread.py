@@ -98,13 +98,15 @@ def segment(task: Task, node: Node, first: int) -> Plan:
     Every action started in the segment ends in it when `node` has no running action.
     """
     tl = node.timeline
+    steps, actions = tl.steps, task.actions
     times = tl.times  # read once (a copy, on the compiled core)
-    ends = {s.partner: k for k, s in enumerate(tl.steps) if s.kind == END}
+    # the end of a start from `first` on comes after it: the steps before need no look
+    ends = {steps[k].partner: k for k in range(first, len(steps)) if steps[k].kind == END}
     out = []
     for k in _plan_steps(task, node, first):
-        step = tl.steps[k]
+        step = steps[k]
         when = round(times[k], 6)
-        name = task.actions[step.action].name
+        name = actions[step.action].name
         if step.kind == INST:
             out.append(ScheduledAction(when, name, None))
         else:
