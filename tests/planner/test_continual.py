@@ -189,16 +189,23 @@ def simulate_state(task: Task, step: ScheduledAction, state: State, part: str) -
     return State(facts, nums, state.open, state.til)
 
 
+def _running_first(
+    task: Task, action: str
+) -> tuple[tuple[ScheduledAction, ...], int, dict[int, str]]:
+    """A plan of `task`, the index of its first `action`, and statuses that have every
+    step before it ended and it running."""
+    plan = search(task).plan
+    assert plan is not None
+    k = next(i for i, a in enumerate(plan.actions) if a.name.startswith(action))
+    return plan.actions, k, {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+
+
 def test_a_started_step_whose_end_the_beliefs_show_is_not_applied_again(task: Task) -> None:
     """The executor's `running` can come after the percepts that show the step ended (in
     lockstep the planner sees the executor's statuses an epoch late): a pickup's
     `increase` must not count twice, or the next pickup is forecast to break the
     capacity (a false failure and a needless repair)."""
-    plan = search(task).plan
-    assert plan is not None
-    steps = plan.actions
-    k = next(i for i, a in enumerate(steps) if a.name.startswith("litter_pickup"))
-    statuses = {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+    steps, k, statuses = _running_first(task, "litter_pickup")
     began = 10.0
     ended = _through(task, steps, k, "end")  # the percepts at the pickup's end
     beliefs = replace(task, init_facts=ended.facts, init_nums=ended.nums)
@@ -211,11 +218,7 @@ def test_a_started_step_whose_end_the_beliefs_show_is_not_applied_again(task: Ta
 
 
 def test_a_started_step_mid_way_gets_its_end_once_and_its_start_not_again(task: Task) -> None:
-    plan = search(task).plan
-    assert plan is not None
-    steps = plan.actions
-    k = next(i for i, a in enumerate(steps) if a.name.startswith("recycle"))
-    statuses = {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+    steps, k, statuses = _running_first(task, "recycle")
     began = 20.0
     started = _through(task, steps, k, "start")  # the recycle's `decrease` shows already
     beliefs = replace(task, init_facts=started.facts, init_nums=started.nums)
@@ -237,11 +240,7 @@ def test_a_step_stretched_past_its_planned_end_is_still_running_in_the_forecast(
 ) -> None:
     """Past the planned end but without its end effects in the beliefs (the world
     stretched it), the step has not ended: its end is applied, once."""
-    plan = search(task).plan
-    assert plan is not None
-    steps = plan.actions
-    k = next(i for i, a in enumerate(steps) if a.name.startswith("litter_pickup"))
-    statuses = {**dict.fromkeys(range(k), "succeeded"), k: "running"}
+    steps, k, statuses = _running_first(task, "litter_pickup")
     started = _through(task, steps, k, "start")
     beliefs = replace(task, init_facts=started.facts, init_nums=started.nums)
     late = Sensed(10.0 + 2 * (steps[k].duration or 0.0), {k: 10.0})
