@@ -24,7 +24,7 @@ from cbdi.runtime.together import TogetherService
 from cbdi.wire import encode
 from cbdi.wire.agent import ActionStatus, PartialPlan, PlanStep
 from cbdi.wire.planner import SearchRequest, SearchStatus
-from cbdi_planner.agent.offline import Execution
+from cbdi_planner.agent.offline import Committed, Execution
 from cbdi_planner.agent.service import PlannerSettings, planner_main
 
 GOAL = [["recycled", "p1"]]
@@ -162,6 +162,17 @@ def test_a_running_pickup_the_beliefs_show_ended_is_committed_as_ended() -> None
     assert (c.count, c.after, c.ends) == (1, "p-1", 8.0)
     (value,) = [v for h, v in c.problem.init_numeric.items() if h.name == "loaded_amount"]
     assert value == 1.0  # not counted again
-    # Before its planned end it cannot be simulated: the beliefs as they are, unfollowed.
-    assert e.commit(DOMAIN, ended, GOAL, 7.0).count == 0
-    assert e.commit(DOMAIN, ended, GOAL).count == 0
+    # Before its planned end, with its end's effects shown (it ended early): the same.
+    c = e.commit(DOMAIN, ended, GOAL, 7.0)
+    assert (c.count, _loaded(c)) == (1, 1.0)
+    # Mid-way (the item off the floor, not yet in hand; the task still reaches the
+    # pickup from the facts it started from): its end applies, once.
+    mid = dataclasses.replace(b, facts=b.facts - {("litter_pose", "p2", "c_3_0")})
+    c = e.commit(DOMAIN, mid, GOAL, 7.0)
+    assert (c.count, _loaded(c)) == (1, 1.0)
+    assert ("holding", "robot1", "p2") in {(a.predicate, *a.args) for a in c.problem.init}
+
+
+def _loaded(c: Committed) -> float:
+    (value,) = [v for h, v in c.problem.init_numeric.items() if h.name == "loaded_amount"]
+    return value

@@ -6,6 +6,7 @@ import itertools
 from pathlib import Path
 
 import pytest
+from msgspec.structs import replace
 
 from cbdi.agentfile import PlanningSettings
 from cbdi.beliefs import BeliefSet
@@ -272,3 +273,31 @@ def status(plan_id: str, step_id: str, what: str) -> ActionStatus:
         reason="",
         time=0.0,
     )
+
+
+def test_a_search_after_a_cancel_follows_the_step_still_running() -> None:
+    """A desire dropped (cancel) while a move runs, another taken up (start): the new
+    plan starts where the move leaves the robot, after it (the executor lets it end)."""
+    core = planner()
+    first = run_first_steps(core, 1)  # moving c_1_0 -> c_2_0
+    core.on_request(replace(request(), kind="cancel"))
+    assert core.search is None
+    core.on_request(replace(request(goal=("p2",)), request_id="s2"))
+    plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert plans[0].applies_after == f"{first.plan_id}-1"
+    step = plans[0].steps[0]
+    assert step.args[:2] == ["robot1", "c_2_0"] and step.start >= 1.0
+
+
+def test_a_search_follows_a_step_of_the_plan_the_executing_one_replaced() -> None:
+    """The executing line is a replacement (a revised goal) queued after a move of the
+    line it replaced, which still runs: a new search follows that move."""
+    core = planner()
+    first = run_first_steps(core, 1)
+    core.on_request(request("revise", ("p2",)))
+    revised = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert core.line is not None and core.line.plan_id == revised[0].plan_id != first.plan_id
+    core.on_request(replace(request(goal=("p2",)), request_id="s2"))
+    plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert plans[0].applies_after == f"{first.plan_id}-1"
+    assert plans[0].steps[0].args[:2] == ["robot1", "c_2_0"]

@@ -28,9 +28,12 @@ from cbdi_planner.agent.lines import (
     Line,
     Search,
     extend,
+    followed,
     forecast_report,
+    held,
     plan_prefix,
     round_report,
+    running_line,
     search_status,
 )
 from cbdi_planner.agent.problem import (
@@ -66,6 +69,7 @@ from cbdi_planner.task import Task
 __all__ = ["ContinualPlanner"]
 
 Log = Callable[..., None]
+PREVIOUS = 8  # lines kept that the executing one follows (see `ContinualPlanner.previous`)
 
 
 class ContinualPlanner(AgentTasks):
@@ -94,6 +98,9 @@ class ContinualPlanner(AgentTasks):
         self.now = 0.0
         self.request: SearchRequest | None = None
         self.line: Line | None = None
+        # The lines `line` took over from (latest last): the steps it follows may still
+        # run there, and a new plan follows them too.
+        self.previous: list[Line] = []
         self._search: Search | None = None
         self.last_forecast: tuple[str, str, str] = ("", "", "")
         self.repair_trigger = ""
@@ -113,6 +120,18 @@ class ContinualPlanner(AgentTasks):
         if old is not None and old is not new and isinstance(old.thread, Improver):
             old.thread.close()  # its worker thread stops
         self._search = new
+
+    def held(self) -> list[tuple[str, ...]]:
+        """The facts the running steps started from (`lines.held`)."""
+        return held(self.domain, [self.line, *self.previous])
+
+    def followed(self, task: Task, line: Line) -> State | None:
+        """The state the running steps `line` follows leave (`lines.followed`)."""
+        return followed(task, line, self.previous, self.now)
+
+    def running_line(self) -> Line | None:
+        """The line whose step runs now: the executing one, or one it follows."""
+        return running_line([self.line, *reversed(self.previous)])
 
     # -- inputs ---------------------------------------------------------------------------
     def on_request(self, req: SearchRequest) -> list[Message]:
@@ -140,11 +159,13 @@ class ContinualPlanner(AgentTasks):
     @staticmethod
     def search_follows_nothing(line: Line) -> bool:
         """Whether no step of `line` runs (a new search need not follow it)."""
-        return not any(st == "running" for st in line.statuses.values())
+        return not line.running()
 
     def _on_request(self, req: SearchRequest) -> list[Message]:
         if req.kind == "cancel":
-            self.request, self.search, self.line = None, None, None
+            # The lines stay: a step of theirs may run (its status may be on its way),
+            # and the next search follows it.
+            self.request, self.search = None, None
             return [self._status(req.request_id, "cancelled")]
         same = self.request is not None and req.request_id == self.request.request_id
         if (
@@ -160,15 +181,16 @@ class ContinualPlanner(AgentTasks):
             req = replace(req, request_id=self.request.request_id, goal=goal)
             self.request = req
             if self.line is not None and self.line.steps:
-                return self._from_committed("revise", self.request_task(req.goal))
-        executing = self.line
+                return self._revise_from_committed(req.goal)
+        executing = self.running_line()
         self.request = replace(req, kind="start")
         self.line, self.last_forecast, self.repair_trigger = None, ("", "", ""), ""
-        if executing is not None and any(st == "running" for st in executing.statuses.values()):
+        self.previous = []
+        if executing is not None:
             # A step of the executing plan runs (a robot mid-drive): the new plan starts
             # from the state it leaves and follows it (the executor lets it end).
+            self.line = executing  # its running steps are in the task (`held`)
             task = self.task(req.goal)
-            self.line = executing
             self._from_committed("new", task, min_commit_steps=0)
             search = self.search
             if search is not None:
@@ -181,6 +203,17 @@ class ContinualPlanner(AgentTasks):
         line = Line(self._plan_id(), "new", self.at_grid(self.now))
         self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
         return [self._status(req.request_id, "searching")]
+
+    def _revise_from_committed(self, goal: list[list[str]]) -> list[Message]:
+        """Search for the revised `goal` from the executing line's committed state;
+        raise Unsolvable if the goal is out of reach from there, even relaxed."""
+        task = self.task(goal)
+        out = self._from_committed("revise", task)
+        search = self.search
+        if search is not None and not reaches_goal(task, search.thread.state):
+            self.search = None
+            raise Unsolvable("no action reaches the goal from these beliefs (relaxed)")
+        return out
 
     def on_status(self, status: ActionStatus) -> None:
         """Record a step's status for the commitment and the forecast.
@@ -196,7 +229,7 @@ class ContinualPlanner(AgentTasks):
             ):
                 return  # a predecessor's plan, still being reported on: not ours to track
             raise UnknownPlanError(status.plan_id, status.step_id)
-        for line in (self.line, self.search.repairs if self.search else None):
+        for line in (self.line, *self.previous, self.search.repairs if self.search else None):
             if (
                 line is not None
                 and status.plan_id == line.plan_id
@@ -232,6 +265,7 @@ class ContinualPlanner(AgentTasks):
             min_commit_steps=self.settings.min_commit_steps,
             horizon=self.settings.forecast_horizon,
             sensed=Sensed(self.now, line.began),
+            start=self.followed(task, line),
         )
         failed = line.step_ids[fc.failed] if fc.failed is not None else ""
         out: list[Message] = []
@@ -273,15 +307,19 @@ class ContinualPlanner(AgentTasks):
         assert line is not None and req is not None
         if min_commit_steps is None:
             min_commit_steps = self.settings.min_commit_steps
-        done = commit(
-            task, line.steps, line.statuses, min_commit_steps, Sensed(self.now, line.began)
-        )
+        start = self.followed(task, line)
+        sensed = Sensed(self.now, line.began)
+        done = commit(task, line.steps, line.statuses, min_commit_steps, sensed, start)
         state: State | None = done.state
         if state is None:
             self.log("commit_failed", plan=line.plan_id, reason=done.reason)
             return []
         after = line.step_ids[done.count - 1] if done.count else ""
         ends = [self.on_grid(a.time) + (a.duration or 0.0) for a in line.steps[: done.count]]
+        if start is not None and not done.count:  # after the running steps it follows
+            after = line.applies_after
+            running = [a for p in self.previous for a in p.running()]
+            ends += [self.on_grid(a.time) + (a.duration or 0.0) for a in running]
         origin = self.at_grid(max([self.now, *ends]))
         new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
         thread: SearchThread | Improver
@@ -426,6 +464,8 @@ class ContinualPlanner(AgentTasks):
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line
         if (search.purpose != "new" or search.repairs is not None) and not line.steps:
+            if self.line is not None and self.line is not line:
+                self.previous = [*self.previous, self.line][-PREVIOUS:]
             self.line = line  # the new line takes over from the committed point
             self.last_forecast = ("", "", "")
             self.repair_trigger = ""

@@ -86,25 +86,32 @@ class Groundings:
         self.grounded = 0
         self.reused = 0
 
-    def task(self, beliefs: BeliefSet, goal: Sequence[Sequence[str]]) -> Task:
-        """Return the task of reaching `goal` from `beliefs`.
+    def task(
+        self, beliefs: BeliefSet, goal: Sequence[Sequence[str]], held: Sequence[Atom] = ()
+    ) -> Task:
+        """Return the task of reaching `goal` from `beliefs`; `held`: facts that held when
+        the running steps started (`held_at_start`), which the task must reach so that
+        those steps and what follows them are in it, though the beliefs lack them now
+        (a busy robot is not `idle`).
 
         Raise GoalError for a goal the domain cannot express and PlannerError (Unsolvable
         among them) as grounding does.
         """
         wanted = tuple(tuple(g) for g in goal)
+        held = sorted({tuple(h) for h in held if h[0] in self.fluent} - beliefs.facts)
         last = self._last
-        if last is not None and last[0] is beliefs and last[1] == wanted:
+        same = last is not None and last[0] is beliefs and last[1] == wanted
+        if last is not None and same and _reaches(self._cached, held):
             return last[2]  # the same beliefs again (a warm-up, then the epoch's work)
         key, fluent_facts, values = self._parts(beliefs)
         cached = self._cached
         task = None
-        if cached is not None and cached.key == key:
+        if cached is not None and cached.key == key and _reaches(cached, held):
             task = self._reuse(cached, fluent_facts, values, wanted)
             self.reused += task is not None
         if task is None:
             problem = problem_from_beliefs(self.domain, beliefs, goal)
-            g = grounding(self.domain, self._superset(beliefs, goal, problem))
+            g = grounding(self.domain, self._superset(beliefs, goal, problem, held))
             self._cached = _Cached(key, g, wanted)
             self.grounded += 1
             task = _with_init(g, fluent_facts, values, self.inert, wanted)
@@ -176,17 +183,33 @@ class Groundings:
         return key, fluents, values
 
     def _superset(
-        self, beliefs: BeliefSet, goal: Sequence[Sequence[str]], problem: Problem
+        self,
+        beliefs: BeliefSet,
+        goal: Sequence[Sequence[str]],
+        problem: Problem,
+        held: Sequence[Atom] = (),
     ) -> Problem:
-        """The problem from `beliefs` plus the transient facts seen before (only those
-        some action changes: a static fact added would change what is static)."""
-        missing = self.transients.missing(beliefs)
+        """The problem from `beliefs` plus the transient facts seen before and the facts
+        `held` (only those some action changes: a static fact added would change what
+        is static)."""
+        missing = sorted(set(self.transients.missing(beliefs)) | set(held))
         if not missing:
             return problem
         extra = [fact(*f) for f in missing if f[0] in self.fluent]
         if not extra:
             return problem
         return problem_from_beliefs(self.domain, beliefs.adding(extra), goal)
+
+
+def _reaches(cached: _Cached | None, facts: Sequence[Atom]) -> bool:
+    """Whether the cached grounding reaches every one of `facts`."""
+    if not facts:
+        return True
+    if cached is None:
+        return False
+    g = cached.grounding
+    index = g.fact_index
+    return all(f in index and g.reached >> index[f] & 1 for f in facts)
 
 
 def _with_init(

@@ -5,22 +5,29 @@ it (baseline: the plan id). A repair, a revised goal or an improvement starts a 
 from the committed state (baseline and `applies_after`: the last committed step), which
 the scheduler swaps in with an early arrest. A *search* is a search thread and the line
 it fills (`ContinualPlanner` in `cbdi_planner.agent.continual` keeps both).
+
+A new line follows steps of the lines before it, which may still run while its own
+wait (a robot mid-drive); so may the line after it, before either starts. The planner
+keeps those lines: what they leave (`followed`) is where the new line's steps start,
+and a new search follows their running steps (`running_line`, `held`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from msgspec.structs import replace
 
 from cbdi.wire.agent import PartialPlan
 from cbdi.wire.planner import ForecastReport, SearchRound, SearchStatus
-from cbdi_planner.agent.steps import plan_steps
-from cbdi_planner.continual import Forecast, RoundDone, SearchThread
+from cbdi_planner.agent.steps import held_at_start, plan_steps
+from cbdi_planner.continual import Forecast, RoundDone, SearchThread, Sensed, commit
 from cbdi_planner.continual.improver import Improver
 from cbdi_planner.pddl.ast import Domain
 from cbdi_planner.plan import Plan, ScheduledAction
+from cbdi_planner.state import State
+from cbdi_planner.task import Task
 
 __all__ = [
     "Line",
@@ -28,8 +35,11 @@ __all__ = [
     "extend",
     "failure_status",
     "forecast_report",
+    "followed",
+    "held",
     "plan_prefix",
     "round_report",
+    "running_line",
     "search_status",
 ]
 
@@ -50,6 +60,10 @@ class Line:
     complete: bool = False
     improved: bool = False
 
+    def running(self) -> list[ScheduledAction]:
+        """The steps of this line that run now."""
+        return [self.steps[k] for k, st in sorted(self.statuses.items()) if st == "running"]
+
     def makespan_after(self, first: int) -> float:
         """Return the scheduled span of the steps from index `first` on."""
         rest = self.steps[first:]
@@ -68,6 +82,41 @@ class Search:
     request_id: str
     repairs: Line | None = None  # the executing line this search continues from
     blocked: bool | None = None  # a failed search: blocked by something that moves?
+
+
+def held(domain: Domain, lines: Sequence[Line | None]) -> list[tuple[str, ...]]:
+    """The facts the running steps of `lines` started from (`held_at_start`): beliefs
+    sensed since may lack them, and the committed state needs those steps."""
+    return [
+        f
+        for line in lines
+        if line is not None
+        for step in line.running()
+        for f in held_at_start(domain, step.name)
+    ]
+
+
+def running_line(lines: Sequence[Line | None]) -> Line | None:
+    """The first of `lines` with a step that runs now."""
+    return next((line for line in lines if line is not None and line.running()), None)
+
+
+def followed(task: Task, line: Line, previous: Sequence[Line], now: float) -> State | None:
+    """The state the steps that `line` follows (up to its `applies_after`, in the lines
+    of `previous`, oldest first) leave when one of them runs; None if none runs (its own
+    steps start from the beliefs) or they cannot be simulated. `now`: when the beliefs
+    (`task`'s initial state) were sensed."""
+    after = line.applies_after
+    prev = next((p for p in reversed(previous) if after and after in p.step_ids), None)
+    if prev is None or prev is line:
+        return None
+    start = followed(task, prev, previous, now)  # what `prev` follows in turn
+    last = prev.step_ids.index(after) + 1
+    statuses = {k: st for k, st in prev.statuses.items() if k < last}
+    if start is None and "running" not in statuses.values():
+        return None
+    sensed = Sensed(now, prev.began)
+    return commit(task, prev.steps[:last], statuses, last, sensed, start).state
 
 
 def plan_prefix(agent: str, life: int) -> str:

@@ -12,6 +12,12 @@ last committed step (`applies_after`), from the time it ends.
 
 A plan that comes back after execution started a step past the committed ones comes
 too late: the executor refuses it (as any late replacement) and the scheduler asks again.
+
+The beliefs are what the robot senses now: mid-step they may lack what the step needed
+to start (a busy robot is not `idle`: grounded from them alone, the task would not even
+hold the step) and may show part of its effects already (a battery used at its start).
+So the task is grounded to reach the running steps (`held_at_start`), and what of their
+effects the beliefs show already is not applied again (`Sensed`).
 """
 
 from __future__ import annotations
@@ -21,12 +27,16 @@ from dataclasses import dataclass, field
 
 from cbdi.beliefs import BeliefSet
 from cbdi.wire.agent import ActionStatus, PlanStep
+from cbdi_planner.agent.grounded import Groundings
 from cbdi_planner.agent.problem import problem_from_beliefs
+from cbdi_planner.agent.steps import held_at_start
 from cbdi_planner.continual import Sensed, commit
 from cbdi_planner.continual.execution import DONE, STARTED
+from cbdi_planner.errors import Unsolvable
 from cbdi_planner.grounding import ground
 from cbdi_planner.pddl.ast import Domain, Problem
 from cbdi_planner.plan import ScheduledAction
+from cbdi_planner.task import Task
 
 __all__ = ["Basis", "Committed", "Execution"]
 
@@ -93,7 +103,7 @@ class Execution:
         as_is = Committed(problem, 0, "", 0.0)
         if not any(self.statuses.get(k) == "running" for k in range(len(self.steps))):
             return as_is
-        task = ground(domain, problem)
+        task = self._task(domain, beliefs, goal, problem)
         finished = _leading(self.statuses, DONE)
         started = _leading(self.statuses, STARTED)
         sensed = Sensed(sensed_at, self.began) if sensed_at is not None else None
@@ -110,6 +120,23 @@ class Execution:
         return Committed(
             problem_from_beliefs(domain, after, goal), done.count, self.ids[done.count - 1], ends
         )
+
+    def _task(
+        self, domain: Domain, beliefs: BeliefSet, goal: list[list[str]], problem: Problem
+    ) -> Task:
+        """The task of `problem`, grounded to reach the running steps too: from the
+        beliefs alone if they do (a grid robot mid-move), else from the beliefs and
+        the facts those steps started from."""
+        running = [self.steps[k].name for k, st in self.statuses.items() if st == "running"]
+        try:
+            task = ground(domain, problem)
+        except Unsolvable:
+            task = None
+        names = {a.name for a in task.actions} if task is not None else set()
+        if task is not None and all(name in names for name in running):
+            return task
+        held = [f for name in running for f in held_at_start(domain, name)]
+        return Groundings(domain).task(beliefs, goal, held)
 
 
 def _leading(statuses: dict[int, str], kinds: tuple[str, ...]) -> int:

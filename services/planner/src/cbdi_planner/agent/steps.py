@@ -13,7 +13,7 @@ from cbdi.wire.agent import Check, CheckOp, PlanStep
 from cbdi_planner.pddl.ast import ALL, START, Action, Compare, Cond, Domain, FHead, Lit, Num
 from cbdi_planner.plan import Plan
 
-__all__ = ["plan_steps"]
+__all__ = ["held_at_start", "plan_steps"]
 
 _OPS: dict[str, CheckOp] = {"<": "LT", "<=": "LE", "=": "EQ", ">=": "GE", ">": "GT"}
 
@@ -64,3 +64,16 @@ def plan_steps(domain: Domain, plan: Plan, start: float, prefix: str) -> list[Pl
             )
         )
     return steps
+
+
+def held_at_start(domain: Domain, name: str) -> list[tuple[str, ...]]:
+    """The facts that held when the ground action `name` ("drive robot1 c_1 c_2") started:
+    its positive `at start` literals (the world let it start). Beliefs sensed after it
+    started may lack them (`(idle robot1)`), and a task grounded from those beliefs alone
+    would not reach the action, nor anything after it."""
+    action_name, *args = name.split()
+    action = next((a for a in domain.actions if a.name == action_name), None)
+    if action is None or len(action.params) != len(args):
+        return []
+    binding = {p.name: v for p, v in zip(action.params, args, strict=True)}
+    return [tuple(c.atom) for c in _checks(action, binding, START) if c.op == "T"]

@@ -58,8 +58,14 @@ class AgentTasks:
         )
 
     def task(self, goal: list[list[str]]) -> Task:
-        """The task of reaching `goal` from the beliefs (grounded once, see `Groundings`)."""
-        return self.groundings.task(self.beliefs, goal)
+        """The task of reaching `goal` from the beliefs (grounded once, see `Groundings`),
+        with every action of the running steps in it (see `held`)."""
+        return self.groundings.task(self.beliefs, goal, self.held())
+
+    def held(self) -> list[tuple[str, ...]]:
+        """The facts the running steps started from (none here; `ContinualPlanner` knows
+        its lines)."""
+        return []
 
     def warm(self, beliefs: BeliefSet, req: SearchRequest | None = None) -> None:
         """Ground ahead (call from a worker thread) the task that `on_beliefs(beliefs)` or
@@ -83,7 +89,7 @@ class AgentTasks:
             return
         self.transients.see(beliefs)
         with contextlib.suppress(GoalError, PlannerError):
-            task = self.groundings.task(beliefs, goal)
+            task = self.groundings.task(beliefs, goal, self.held())
             RelaxedPlanGraph.of(task)  # what reaches_goal uses
             prepare(task)  # what a search of it expands with
 

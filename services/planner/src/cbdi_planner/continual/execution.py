@@ -126,8 +126,12 @@ def _shown(
     start = _shows(action.start, facts)
     if action.end is None:
         return start, start
-    end = start and now >= began + duration - EPS and _shows(action.end, facts)
-    return start, end
+    if not start or not _shows(action.end, facts):
+        return start, False
+    # Past its planned end, or ended early (a performer faster than planned): its end's
+    # effects on facts show; an end with none is judged by the time alone.
+    has_facts = bool(action.end.add | action.end.dele)
+    return start, has_facts or now >= began + duration - EPS
 
 
 def _shows(snap: Snap, facts: int) -> bool:
@@ -158,11 +162,14 @@ def commit(
     statuses: Mapping[int, str],
     min_commit_steps: int = 1,
     sensed: Sensed | None = None,
+    start: State | None = None,
 ) -> Commitment:
     """Return the commitment of the plan `steps` (in order) given each step's status.
 
     `task`'s initial state is the current beliefs, which include every finished step
-    (and, told by `sensed`, what of the started ones they show).
+    (and, told by `sensed`, what of the started ones they show). `start`: the state to
+    simulate from instead (a plan that follows the running steps of another plan: the
+    state they leave).
     """
     finished = 0
     while finished < len(steps) and statuses.get(finished) in DONE:
@@ -171,7 +178,7 @@ def commit(
     while count < len(steps) and statuses.get(count) in STARTED:
         count += 1
     count = min(len(steps), max(count, finished + min_commit_steps))
-    state = State(task.init_facts, task.init_nums)
+    state = start or State(task.init_facts, task.init_nums)
     for k in range(finished, count):
         if statuses.get(k) in STARTED:
             began = sensed.began.get(k) if sensed is not None else None
@@ -196,13 +203,15 @@ def forecast(
     min_commit_steps: int = 1,
     horizon: int = 0,
     sensed: Sensed | None = None,
+    start: State | None = None,
 ) -> Forecast:
     """Simulate the plan's unfinished steps from the current beliefs (`task`'s initial
     state) and classify: fails in the committed part, fails after it, or holds.
 
-    `horizon` > 0 simulates only that many steps after the committed ones.
+    `horizon` > 0 simulates only that many steps after the committed ones; `sensed` and
+    `start` as for `commit`.
     """
-    done = commit(task, steps, statuses, min_commit_steps, sensed)
+    done = commit(task, steps, statuses, min_commit_steps, sensed, start)
     if done.state is None:
         return Forecast(COMMITTED_FAILS, None, done.reason, done)
     rest = steps[done.count :]
