@@ -237,3 +237,44 @@ def test_a_search_that_fails_after_the_beliefs_changed_under_it_is_retried_at_on
     assert kinds(s.retry()) == ["start_search"] and not s.retry_due
     s.on_search_failed("no plan")  # from the beliefs of now: waits for a change
     assert not s.retry_due and s.retry_when().startswith("when the beliefs change")
+
+
+def test_two_agents_head_to_head_stall_apart_with_a_spread() -> None:
+    """Two robots waiting for each other in lockstep begin waiting in the same epoch;
+    without a spread they stall together (and, stepping aside together, meet again);
+    with one, each agent's stall comes at its own time, the same in every run."""
+
+    def stall_time(agent: str, spread: float) -> float:
+        s = IntentionScheduler(wait_stall=8, spread=spread, agent=agent)
+        s.choose(RECYCLE)
+        s.on_search_failed("in the way", blocked=True, now=10)
+        t = 10.0
+        while not s.stalled(t):  # nothing changes meanwhile: no retry
+            t += 1.0
+        return t
+
+    assert stall_time("robot1", 0.0) == stall_time("robot2", 0.0) == 18.0
+    apart = stall_time("robot1", 1.0), stall_time("robot2", 1.0)
+    assert apart[0] != apart[1] and all(18.0 <= t <= 26.0 for t in apart)
+    assert apart == (stall_time("robot1", 1.0), stall_time("robot2", 1.0))
+
+
+def test_a_wait_can_stall_however_the_beliefs_change() -> None:
+    """`quiet` (the default): a change (a cart passing by) starts the count again, so
+    a wait among things that move never stalls; `waiting`: the seconds of waiting count."""
+    for counts, stalls_at in (("quiet", None), ("waiting", 15.0)):
+        s = IntentionScheduler(wait_stall=5, stall_counts=counts)
+        s.choose(RECYCLE)
+        s.on_search_failed("in the way", blocked=True, now=10)
+        stalled_at, again = None, []
+        for t in range(11, 30):
+            again = s.stalled(float(t))
+            if again:
+                stalled_at = float(t)
+                break
+            s.retry(float(t))  # the beliefs changed this epoch: search again
+            s.on_search_failed("in the way", blocked=True, now=float(t))
+        assert stalled_at == stalls_at
+        if counts == "waiting":
+            assert s.current is not None and s.current.stalled
+            assert kinds(again) == ["start_search"] and "blocked for 5 s" in again[0].reason

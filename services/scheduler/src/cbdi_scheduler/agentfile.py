@@ -27,6 +27,7 @@ from cbdi.beliefs import FUNCTION, INSTANCE, PREDICATE, Belief
 from cbdi.keys import validate_name
 from cbdi_scheduler.conditions import Condition
 from cbdi_scheduler.desires import NO_DEADLINE, Desire
+from cbdi_scheduler.intentions import StallCounts
 from cbdi_scheduler.knowledge import available
 from cbdi_scheduler.literals import LiteralSyntaxError, parse_belief, parse_literal
 from cbdi_scheduler.rules import ReactiveRule, RuleEffect
@@ -61,6 +62,9 @@ class AgentFile:
     exec_retries: int = 3
     rtc_deadline: float = 2.0  # the executing desire's deadline: this many times its span
     wait_stall: float = 8.0  # s a blocked wait may see nothing change before it counts
+    # Up to this fraction of wait_stall more, drawn per agent and stall (see intentions).
+    wait_stall_spread: float = 0.0
+    wait_stall_counts: StallCounts = "quiet"  # what wait_stall counts (see intentions)
     claim: tuple[str, ...] = ()  # goal predicates whose first argument the group shares out
     knowledge: str = "literals"  # the domain knowledge (cbdi.knowledge entry point) to load
     beliefs: tuple[Belief, ...] = ()
@@ -107,6 +111,10 @@ def _interpret(raw: RawAgentFile, agent: str) -> AgentFile:
         exec_retries=r.natural(bdi, "exec_retries", 3, "scheduler"),
         rtc_deadline=_rtc_deadline(r.opt(bdi, "rtc_deadline", float, 2.0, "scheduler"), source),
         wait_stall=_wait_stall(r.opt(bdi, "wait_stall", float, 8.0, "scheduler"), source),
+        wait_stall_spread=_spread(r.opt(bdi, "wait_stall_spread", float, 0.0, "scheduler"), source),
+        wait_stall_counts=_stall_counts(
+            r.opt(bdi, "wait_stall_counts", str, "quiet", "scheduler"), source
+        ),
         knowledge=_knowledge(r.opt(data, "knowledge", str, "literals"), source),
         claim=tuple(
             r.check(p, str, f"scheduler.claim[{i}]")
@@ -163,6 +171,23 @@ def _knowledge(name: str, source: str) -> str:
         why = f"no domain knowledge {name!r} is installed (installed: {known})"
         raise AgentFileError(source, "knowledge", why)
     return name
+
+
+def _stall_counts(value: str, source: str) -> StallCounts:
+    if value == "quiet":
+        return "quiet"
+    if value == "waiting":
+        return "waiting"
+    why = f"expected 'quiet' (seconds with nothing changing) or 'waiting', got {value!r}"
+    raise AgentFileError(source, "scheduler.wait_stall_counts", why)
+
+
+def _spread(value: float, source: str) -> float:
+    if not (math.isfinite(value) and 0 <= value <= 4):
+        raise AgentFileError(
+            source, "scheduler.wait_stall_spread", f"expected a fraction from 0 to 4, got {value}"
+        )
+    return float(value)
 
 
 def _wait_stall(value: float, source: str) -> float:

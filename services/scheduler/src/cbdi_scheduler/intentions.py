@@ -23,17 +23,30 @@ cancel a search, pass a plan to the executor, ask for an early arrest, drop a de
   search that fails after one is retried at the next cycle. A wait
   in which nothing changes for `wait_stall` seconds (a person waiting for the robot that
   waits for it) counts as a failure and searches again, so a deadlock ends in a drop.
+  With a `spread`, each agent's stall comes up to that fraction of `wait_stall` later,
+  drawn from its name and how many times its intention stalled: two robots that hold
+  each other up in lockstep stall in the same epoch and, stepping aside together, meet
+  again; drawn apart, one steps aside and the other passes (a run stays a function of
+  its inputs: the draw is a hash, not a clock or a random stream). With `stall_counts`
+  "waiting" the seconds of waiting count, whatever changes meanwhile.
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import dataclass, field
+from typing import Literal
 
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan
 from cbdi_scheduler.desires import Desire
 
-__all__ = ["Command", "IntentionScheduler"]
+__all__ = ["Command", "IntentionScheduler", "StallCounts"]
+
+# What a blocked wait's `wait_stall` counts: seconds in which nothing changed ("quiet"),
+# or seconds of waiting, whatever changed meanwhile ("waiting": a cart passing by or a
+# door opening elsewhere does not keep two robots head to head waiting for ever).
+StallCounts = Literal["quiet", "waiting"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +74,7 @@ class Intention:
     exec_failures: int = 0
     waiting: bool = False  # its goal is blocked by something that moves
     quiet_since: float = 0.0  # when the wait last searched again
+    waiting_since: float = 0.0  # when the wait began (or last stalled)
     stalled: bool = False  # its wait saw nothing change for wait_stall seconds
     # Its plan was lost with a restarted executor: the next search may run while the
     # robot's action is still under way (an item neither on the ground nor in hand), so
@@ -77,12 +91,17 @@ class IntentionScheduler:
         plan_retries: int = 3,
         exec_retries: int = 3,
         wait_stall: float = 8.0,
+        *,
+        spread: float = 0.0,
+        agent: str = "",
+        stall_counts: StallCounts = "quiet",
     ) -> None:
         if preemption not in ("no_preempt", "preempt", "clean_preempt"):
             raise ValueError(f"unknown preemption policy {preemption!r}")
         self.preemption = preemption
         self.plan_retries, self.exec_retries = plan_retries, exec_retries
         self.wait_stall = wait_stall
+        self.spread, self.agent, self.stall_counts = spread, agent, stall_counts
         self.current: Intention | None = None
         self.next_desire: Desire | None = None  # waits for a clean preemption
         self.stopping = False
@@ -205,7 +224,7 @@ class IntentionScheduler:
             self.retry_reason = f"retry after: {reason}"
             if cur.waiting:
                 return []
-            cur.waiting, cur.quiet_since = True, now
+            cur.waiting, cur.quiet_since, cur.waiting_since = True, now, now
             why = f"{reason}; searching again {self.retry_when()}"
             return [Command("wait", cur.desire, reason=why)]
         cur.waiting = False
@@ -231,7 +250,7 @@ class IntentionScheduler:
         if self.changed_meanwhile:
             when = "at the next cycle (the beliefs changed while it searched)"
         elif cur.waiting:
-            stall = cur.quiet_since + self.wait_stall
+            stall = self._since(cur) + self.stall_after(cur)
             when = f"when the beliefs change, or at t={stall:g} if nothing does"
         else:
             when = "when the beliefs change"
@@ -256,6 +275,19 @@ class IntentionScheduler:
         cur.quiet_since = now
         return [self._search(cur.desire, reason)]
 
+    def _since(self, cur: Intention) -> float:
+        """When `cur`'s wait started to count toward a stall."""
+        return cur.quiet_since if self.stall_counts == "quiet" else cur.waiting_since
+
+    def stall_after(self, cur: Intention) -> float:
+        """How long `cur`'s blocked wait may see nothing change: `wait_stall`, plus up to
+        `spread` of it drawn from the agent's name and the intention's failures so far."""
+        if not self.spread:
+            return self.wait_stall
+        key = f"{self.agent}/{cur.desire.name}/{cur.plan_failures}".encode()
+        draw = zlib.crc32(key) / 2**32
+        return self.wait_stall * (1 + self.spread * draw)
+
     def stalled(self, now: float) -> list[Command]:
         """Nothing changed: a blocked wait quiet for `wait_stall` seconds counts as a
         failed planning (dropped after `plan_retries`) and searches again."""
@@ -264,11 +296,14 @@ class IntentionScheduler:
             cur is None
             or not cur.waiting
             or not self.retry_reason
-            or now - cur.quiet_since < self.wait_stall
+            or now - self._since(cur) < self.stall_after(cur)
         ):
             return []
-        reason = f"blocked for {now - cur.quiet_since:g} s with nothing moving"
-        cur.stalled = True
+        if self.stall_counts == "quiet":
+            reason = f"blocked for {now - cur.quiet_since:g} s with nothing moving"
+        else:
+            reason = f"blocked for {now - cur.waiting_since:g} s"
+        cur.stalled, cur.waiting_since = True, now
         dropped = self._failed_planning(reason)
         if dropped:
             return dropped

@@ -50,7 +50,13 @@ class Mind:
         self.beliefs = BeliefSet.of(spec.beliefs)
         self.desires: dict[str, Desire] = {d.name: d for d in spec.desires}
         self.intentions = IntentionScheduler(
-            spec.preemption, spec.plan_retries, spec.exec_retries, spec.wait_stall
+            spec.preemption,
+            spec.plan_retries,
+            spec.exec_retries,
+            spec.wait_stall,
+            spread=spec.wait_stall_spread,
+            agent=spec.agent,
+            stall_counts=spec.wait_stall_counts,
         )
         self.now = 0.0
         self.epoch = -1
