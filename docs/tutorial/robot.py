@@ -10,9 +10,10 @@ import asyncio
 import signal
 import sys
 
-from cbdi.performer import ActionCall, Outcome, serve_performer
+from cbdi.performer import ActionCall, Outcome
+from cbdi.robot import Robot
 from cbdi.security.login import open_as
-from cbdi.sensor import Prototype, run_sensor
+from cbdi.sensor import Prototype
 
 
 class Room:
@@ -34,7 +35,7 @@ class Carry:
             return Outcome.failure(f"no {thing} on the {here}")
         del self.room.where[thing]  # picked up
         print(f"carrying the {thing} from the {here} to the {there}", flush=True)
-        await asyncio.sleep(call.duration)  # on its way (here: as long as planned)
+        await call.sleep(call.duration)  # on its way (here: as long as planned)
         self.room.where[thing] = there
         print(f"put the {thing} on the {there}", flush=True)
         return Outcome.success()
@@ -60,10 +61,11 @@ async def main(router: str) -> None:
     loop, me = asyncio.get_running_loop(), asyncio.current_task()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, me.cancel)  # type: ignore[union-attr]
+    robot = Robot(bus, "robot1")  # in a lockstep run, a member the run waits for
+    robot.perform("carry", Carry(room))
+    robot.sense(Things(room), rate=4.0)
     try:
-        async with asyncio.TaskGroup() as tasks:
-            tasks.create_task(serve_performer(bus, "robot1", "carry", Carry(room)))
-            tasks.create_task(run_sensor(bus, "robot1", Things(room), rate=4.0))
+        await robot.run()
     except asyncio.CancelledError:
         pass  # stopped: the bus is closed, then exit
     finally:

@@ -13,6 +13,8 @@ own directory).
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
 import shlex
 import signal
@@ -175,3 +177,52 @@ def test_the_tutorial_runs_as_shown(tmp_path: Path) -> None:
     outcomes = recorded_as(recorded, "/robot1/performer/outcomes", ActionOutcome)
     assert [(o.action, o.status) for o in outcomes] == [("carry", "succeeded")]
     assert not [m for m in recorded if m.key == "cbdi/trace/world/rpc/act/request"]
+
+
+@pytest.mark.e2e
+def test_the_tutorial_in_lockstep_is_the_same_run_twice_and_replays(tmp_path: Path) -> None:
+    """`cbdi up docs/tutorial/scenario.toml --lockstep`: robot.py is a lockstep member
+    (cbdi.robot), the run waits for it each epoch, and its carry's outcome is part of
+    the run's trace: two runs, each with a fresh robot.py, give the same trace, and the
+    recording's agent decides again as it did (`cbdi replay --check`)."""
+    (robot_cmd, _), (up_cmd, _), _ = transcripts()
+    digests = []
+    for run in (1, 2):
+        port = free_port()
+        record = tmp_path / f"tidy{run}.mcap"
+        robot = Proc(argv(robot_cmd, port, tmp_path), tmp_path / f"robot{run}.log", FAULTHANDLER)
+        try:
+            up = subprocess.run(
+                [
+                    *argv(up_cmd.split(" --record")[0], port, tmp_path),
+                    *("--lockstep", "--speed", "0", "--json", "--record", str(record)),
+                ],
+                capture_output=True,
+                text=True,
+                timeout=300,
+                cwd=REPO,
+                stdin=subprocess.DEVNULL,
+            )
+            said = robot.output()
+        finally:
+            robot.stop()
+        assert up.returncode == 0, up.stderr[-3000:]
+        summary = json.loads(up.stdout)
+        assert summary["result"] == "time_limit" and not summary["stalls"], summary
+        assert summary["performed"] == {"robot1": {"carry": 1}}, summary
+        assert "put the cup on the shelf" in said and "lockstep_member" in said, said[-3000:]
+        outcomes = recorded_as(list(read_messages(record)), "/performer/outcomes", ActionOutcome)
+        assert [(o.action, o.status) for o in outcomes] == [("carry", "succeeded")]
+        digests.append(summary["trace_digest"])
+    assert digests[0] == digests[1] != hashlib.sha256().hexdigest()  # not an empty trace
+    check = subprocess.run(
+        [
+            *(str(BIN / "cbdi"), "replay", str(tmp_path / "tidy1.mcap"), "--agent", "robot1"),
+            *("--check", "--agent-file", str(EXAMPLE / "agent.toml")),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+    assert check.returncode == 0, check.stdout + check.stderr

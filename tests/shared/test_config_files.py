@@ -7,6 +7,7 @@ files gives nothing else, and `cbdi up` exits 2 for a bad scenario.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import random
 import subprocess
@@ -19,6 +20,7 @@ from cbdi_recycling.maps import load_map
 
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import load_scenario
+from cbdi.launcher.services import world_args
 from cbdi_scheduler.agentfile import load_agent
 
 REPO = Path(__file__).resolve().parents[2]
@@ -209,12 +211,15 @@ def test_a_domain_action_nobody_performs_stops_cbdi_up_before_it_starts(tmp_path
             f'agent_file = "{tmp_path / "agent.toml"}"\n'
         )
         if performers:
-            assert load_scenario(path).agents[0].name == "robot1"
-            # Performers act in real time: a lockstep run with them is refused.
-            done = subprocess.run(
-                [str(CBDI), "up", str(path), "--lockstep"], capture_output=True, text=True
-            )
-            assert done.returncode == 2 and "performers act in real time (drive)" in done.stderr
+            scenario = load_scenario(path)
+            assert scenario.agents[0].name == "robot1"
+            # In lockstep the robot's own process (cbdi.robot) is a member the world
+            # waits for; in real time it is not.
+            for lockstep in (True, False):
+                run = dataclasses.replace(scenario.run, lockstep=lockstep)
+                args = world_args(dataclasses.replace(scenario, run=run))
+                members = [args[i + 1] for i, a in enumerate(args) if a == "--member"]
+                assert ("robot1/performer" in members) is lockstep, members
             continue
         with pytest.raises(CbdiError, match=rf"{domain}:{line}: action drive: nobody performs"):
             load_scenario(path)

@@ -18,7 +18,8 @@ plan's duration), runs `perform` as a task, and publishes how it ended on the ag
 performer outcome stream; a `perform` that raises fails the step with the exception as
 the reason, and the performer goes on serving. Time comes from the world's clock (the
 outcome is stamped with the latest tick), so a performer sits beside a simulated world
-or stands in for it; performers act in real time (not in a lockstep run).
+or stands in for it. A performer that waits with `call.sleep` (not `asyncio.sleep`)
+takes part in lockstep runs too, its process a lockstep member (`cbdi.robot`).
 """
 
 from __future__ import annotations
@@ -29,8 +30,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from cbdi import keys
-from cbdi.bus import Bus, ErrorSink, LogSink, messages, publish, serve
-from cbdi.wire.agent import ExecutorStop
+from cbdi.bus import Bus, ErrorSink
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest, Tick
@@ -40,6 +40,7 @@ __all__ = [
     "Outcome",
     "Performer",
     "PerformerHost",
+    "Sleeper",
     "outcomes_key",
     "performer_key",
     "serve_performer",
@@ -62,6 +63,12 @@ def outcomes_key(agent: str) -> str:
     return keys.agent_stream(agent, "performer", "outcomes")
 
 
+class Sleeper(Protocol):
+    """How a performer waits: wall seconds, or simulated ones in lockstep (`cbdi.robot`)."""
+
+    def sleep(self, seconds: float) -> Awaitable[None]: ...
+
+
 @dataclass(frozen=True)
 class ActionCall:
     """One grounded PDDL action to carry out: `(action *args)`, planned to last `duration`."""
@@ -71,6 +78,15 @@ class ActionCall:
     args: tuple[str, ...]
     duration: float
     request_id: str
+    clock: Sleeper | None = field(default=None, compare=False, repr=False)
+
+    async def sleep(self, seconds: float) -> None:
+        """Wait `seconds` of the run's time: wall seconds in real time, simulated ones in
+        lockstep (the run waits for the performer, however long that takes)."""
+        if self.clock is None:
+            await asyncio.sleep(seconds)
+        else:
+            await self.clock.sleep(seconds)
 
 
 @dataclass(frozen=True)
@@ -106,6 +122,9 @@ class PerformerHost:
     epoch: int = 0
     time: float = 0.0
     running: dict[str, asyncio.Task[None]] = field(default_factory=dict)
+    clock: Sleeper | None = None  # what `ActionCall.sleep` waits with (None: wall time)
+    # Every call's task until its outcome is out (`running` lets go of it before that).
+    tasks: set[asyncio.Task[None]] = field(default_factory=set)
 
     def on_tick(self, tick: Tick) -> None:
         if tick.epoch >= self.epoch:
@@ -118,8 +137,13 @@ class PerformerHost:
             return ErrorReply(code="bad_request", message=f"{why}, not {req.action!r}")
         if req.request_id in self.running:
             return ActionReply(request_id=req.request_id, accepted=False, reason="already running")
-        call = ActionCall(req.agent, req.action, tuple(req.args), req.duration, req.request_id)
-        self.running[req.request_id] = asyncio.create_task(self._run(call))
+        call = ActionCall(
+            req.agent, req.action, tuple(req.args), req.duration, req.request_id, self.clock
+        )
+        task = asyncio.create_task(self._run(call))
+        self.running[req.request_id] = task
+        self.tasks.add(task)
+        task.add_done_callback(self.tasks.discard)
         ends = self.time + req.duration
         return ActionReply(
             request_id=req.request_id, accepted=True, starts_at=self.time, ends_at=ends
@@ -173,32 +197,11 @@ async def serve_performer(
     bus: Bus, agent: str, action: str, performer: Performer, sink: ErrorSink | None = None
 ) -> None:
     """Serve `performer` as `agent`'s performer of `action` until cancelled; bad input
-    goes to `sink` (default: logged), never ends it."""
-    keys.validate_name(agent)
-    keys.validate_name(action, "action")
-    errors = sink or LogSink()
+    goes to `sink` (default: logged), never ends it. It is a `cbdi.robot.Robot` with
+    this one performer (a process with several performers or sensors makes one Robot of
+    them all: in lockstep it is one member)."""
+    from cbdi.robot import Robot
 
-    async def out(outcome: ActionOutcome) -> None:
-        await publish(bus, outcomes_key(agent), outcome, block=True)
-
-    host = PerformerHost(agent, action.lower(), performer, out)
-
-    async def clock() -> None:
-        async for _key, tick in messages(bus, keys.world_stream("clock"), Tick, errors):
-            host.on_tick(tick)
-
-    async def stops() -> None:
-        async for _key, stop in messages(bus, stop_key(agent), ExecutorStop, errors):
-            if stop.op == "stop":
-                await host.stop()
-
-    async def answer(_key: str, req: ActionRequest) -> Message:
-        return host.on_request(req)
-
-    followers = [asyncio.create_task(clock()), asyncio.create_task(stops())]
-    try:
-        await serve(bus, performer_key(agent, action), ActionRequest, answer, errors)
-    finally:
-        for task in followers:
-            task.cancel()
-        host.cancel()
+    robot = Robot(bus, agent, sink=sink)
+    robot.perform(action, performer)
+    await robot.run()

@@ -50,7 +50,15 @@ from cbdi.errors import CbdiError
 from cbdi.runtime.log import Log
 from cbdi.wire.agent import AgentReply, AgentRequest, RequestOp
 
-__all__ = ["KINDS", "Change", "Prototype", "Sensor", "SensorLoop", "run_sensor"]
+__all__ = [
+    "KINDS",
+    "Change",
+    "Prototype",
+    "Sensor",
+    "SensorLoop",
+    "read_and_tell",
+    "run_sensor",
+]
 
 Kind = Literal["predicate", "function", "event"]
 KINDS: tuple[str, ...] = ("predicate", "function", "event")
@@ -137,6 +145,9 @@ class SensorLoop:
     refused: dict[tuple[tuple[str, ...], str], float] = field(default_factory=dict)
     pending: list[Change] = field(default_factory=list)  # events not answered yet
     rejected: list[str] = field(default_factory=list)  # the last reading's misfits, why
+    # In lockstep, the epoch of the reading (`cbdi.robot`): the agent applies what it
+    # changes before its percepts of the next epoch. -1: at once (real time).
+    epoch: int = -1
 
     def changes(self, reading: Any) -> list[Change]:
         """What to tell for `reading`; items that do not fit the prototype are left
@@ -193,6 +204,7 @@ class SensorLoop:
             op=change.op,
             belief=proto.literal(change.args, change.value),
             threshold=proto.threshold,
+            epoch=self.epoch,
         )
 
     def answered(self, change: Change, reply: AgentReply) -> None:
@@ -227,13 +239,19 @@ async def run_sensor(
     log = log or Log(f"{agent}/sensor/{proto.name}")
     loop = SensorLoop(agent, sensor, sender, group)
     while True:
-        try:
-            reading = await sensor.read()
-        except Exception as exc:  # the user's code failed: say so, read again later
-            log.warning("read_failed", reason=f"{type(exc).__name__}: {exc}")
-        else:
-            await _tell(bus, loop, reading, timeout, log)
+        await read_and_tell(bus, loop, timeout, log)
         await asyncio.sleep(1.0 / rate)
+
+
+async def read_and_tell(bus: Bus, loop: SensorLoop, timeout: float, log: Log) -> None:
+    """Read `loop`'s sensor once and tell the agent what changed; a failing `read` is
+    logged (the next reading tries again)."""
+    try:
+        reading = await loop.sensor.read()
+    except Exception as exc:  # the user's code failed: say so, read again later
+        log.warning("read_failed", reason=f"{type(exc).__name__}: {exc}")
+    else:
+        await _tell(bus, loop, reading, timeout, log)
 
 
 async def _tell(bus: Bus, loop: SensorLoop, reading: Any, timeout: float, log: Log) -> None:

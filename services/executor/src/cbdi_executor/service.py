@@ -24,6 +24,7 @@ from cbdi.errors import CbdiError, RequestTimeoutError
 from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
 from cbdi.performer import outcomes_key, performer_key, stop_key
 from cbdi.plugins import percept_types
+from cbdi.robot import MEMBER
 from cbdi.runtime import ServiceContext, ServiceSettings
 from cbdi.runtime.service import ServiceMain
 from cbdi.wire.agent import (
@@ -127,7 +128,7 @@ class ExecutorService:
             keys.scheduler_arrest(a),
             keys.scheduler_beliefs(a),
             keys.epoch_ack(a, "scheduler"),
-            *([outcomes_key(a)] if self.performers else []),
+            *([outcomes_key(a), keys.epoch_ack(a, MEMBER)] if self.performers else []),
         ]
 
     async def run(self, stream: AsyncIterator[Stamped]) -> None:
@@ -142,12 +143,15 @@ class ExecutorService:
     async def epochs(self, first: int) -> None:
         """Lockstep: the executor's part of each epoch, once the scheduler's is done."""
         scheduler = keys.member(self.agent, "scheduler")
+        robot = keys.member(self.agent, MEMBER)  # its performers' process (cbdi.robot)
         members = await self.lockstep.learn_members(self.ctx.bus)
         epoch = first
         while True:
             needs = [Need(WORLD, epoch)]
             if scheduler in members:
                 needs.append(Need(scheduler, epoch))
+            if robot in members:  # the outcomes of its calls that ended by this epoch
+                needs.append(Need(robot, epoch))
             released = await self.lockstep.gate.wait(needs, self.ack_timeout)
             if released.late:
                 self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))

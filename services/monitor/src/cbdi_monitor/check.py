@@ -22,6 +22,7 @@ from cbdi import keys
 from cbdi.bus import LogSink, MemoryNetwork, messages
 from cbdi.bus.base import Bus
 from cbdi.clock import Clock, WallClock
+from cbdi.errors import CbdiError
 from cbdi.runtime.host import SHELLS
 from cbdi.runtime.together import Together, TogetherService
 from cbdi.wire.world import EpochAck
@@ -30,6 +31,7 @@ from cbdi_monitor.errors import NoShellError
 from cbdi_monitor.reenact import (
     REPLAYED,
     AgentScript,
+    Ask,
     Await,
     Output,
     Send,
@@ -154,6 +156,12 @@ async def _play(script: AgentScript, network: MemoryNetwork, acks: _Acks, timeou
         if isinstance(step, Send):
             bus = standins.get(step.sender) or standins.setdefault(step.sender, network.bus())
             await bus.publish(step.key, step.payload, block=True)
+        elif isinstance(step, Ask):
+            asker = standins.get("asker") or standins.setdefault("asker", network.bus())
+            try:
+                await asker.request(step.key, step.payload, timeout=timeout)
+            except CbdiError as exc:
+                return f"the request on {step.key} was not answered: {exc}"
         elif not await acks.wait(step, timeout):
             what = "start (ready)" if step.epoch < 0 else f"epoch {step.epoch} ({step.stage})"
             return f"{step.member} did not acknowledge its {what} within {timeout:g} s"

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from cbdi import keys
 from cbdi.errors import WireError
 from cbdi.lockstep import default_sender
+from cbdi.wire.agent import AgentRequest
 from cbdi.wire.base import decode
 from cbdi.wire.common import RunFinished, RunLaunched
 from cbdi.wire.world import EpochAck, Tick, WorldInfo
@@ -36,6 +37,7 @@ from cbdi_monitor.reader import RecordedMessage
 __all__ = [
     "REPLAYED",
     "AgentScript",
+    "Ask",
     "Await",
     "Output",
     "Send",
@@ -70,7 +72,17 @@ class Await:
     stage: str
 
 
-Step = Send | Await
+@dataclass(frozen=True, slots=True)
+class Ask:
+    """Ask the rebuilt scheduler `payload` on `key` again: a request stamped with its
+    asker's epoch (a sensor of a robot's process, `cbdi.robot`; a peer's rule), which the
+    scheduler applies before its percepts of the next epoch, so it is part of the run."""
+
+    key: str
+    payload: bytes
+
+
+Step = Send | Await | Ask
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,7 +254,13 @@ def _steps(
     started: set[str] = set()
     lives: dict[str, int] = {}  # sender -> restarts seen
     last: dict[tuple[str, str], int] = {}  # (sender, key) -> last sequence number
+    asked = keys.trace(keys.component_rpc(agent, "scheduler", "request")) + "/request"
     for m in records:
+        if m.key == asked:
+            ask = _epoch_request(m.payload, agent)
+            if ask is not None:
+                steps.append(ask)
+            continue
         sender = sender_of(m.key)
         if sender is None:
             continue
@@ -264,6 +282,18 @@ def _steps(
         life = lives.get(sender, 0)
         steps.append(Send(f"{sender}#{life}" if life else sender, m.key, m.payload))
     return steps, notes
+
+
+def _epoch_request(payload: bytes, agent: str) -> Ask | None:
+    """The request a recorded mirror shows, to ask again, if it is stamped with an epoch
+    (one stamped -1, an operator's, took effect at once: when depends on the pace)."""
+    try:
+        req = decode(payload, AgentRequest, "request")
+    except WireError:
+        return None
+    if req.epoch < 0:
+        return None
+    return Ask(keys.agent_request(agent, req.group), payload)
 
 
 def outputs_of(

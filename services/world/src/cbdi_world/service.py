@@ -29,12 +29,15 @@ from cbdi.bus import messages, publish, serve
 from cbdi.bus.typed import dropping
 from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError
+from cbdi.performer import outcomes_key
+from cbdi.robot import MEMBER
 from cbdi.runtime import ServiceContext
 from cbdi.runtime.service import ServiceMain
 from cbdi.simulator import EpochResult, Simulator
 from cbdi.wire.base import Message
 from cbdi.wire.common import ErrorReply, RunFinished
 from cbdi.wire.world import (
+    ActionOutcome,
     ActionReply,
     ActionRequest,
     ClockRequest,
@@ -95,6 +98,7 @@ class WorldService:
         self.sent_before: dict[str, int] = {}  # lockstep: RunFinished.sent
         self.lateness = Lateness(self.epoch_wall())
         self.trace = RequestTrace()
+        self.performed: Counter[str] = Counter()  # performer outcomes seen, per agent
         self.last_tick: Tick | None = None  # for members that join late (rpc/clock)
         self.keeper = keeper
         self.served: dict[str, Served] = {}  # this epoch's requests, by id: served once
@@ -116,6 +120,8 @@ class WorldService:
         ctx.start(clock, name="clock")
         acks = messages(bus, keys.epoch_ack_all(), EpochAck, ctx)
         ctx.start(self.follow_acks(acks), name="acks")
+        performed = messages(bus, outcomes_key("*"), ActionOutcome, ctx)
+        ctx.start(self.follow_performed(performed), name="performed")
         ctx.start(self.run(), name="epochs")
 
     async def on_act(self, key: str, req: ActionRequest) -> Message:
@@ -180,6 +186,32 @@ class WorldService:
                 continue
             with dropping(self.ctx, key, ack):
                 await self.acks.observe(ack)
+
+    async def follow_performed(self, outcomes: AsyncIterator[tuple[str, ActionOutcome]]) -> None:
+        """Fold the outcomes of actions performed outside the world into the trace."""
+        async for key, outcome in outcomes:
+            if outcome.agent not in self.agents or keys.describe(key)["agent"] != outcome.agent:
+                self.ctx.bad_input(key, UnknownAgentError(outcome.agent))
+                continue
+            self.trace.performed(outcome)
+            self.performed[outcome.agent] += 1
+
+    async def all_performed(self, timeout: float = 5.0) -> None:
+        """Wait (up to `timeout` wall s) for the performer outcomes the members' latest
+        acks say were sent: the last epoch's may come after its ack."""
+        loop = asyncio.get_running_loop()
+        end = loop.time() + timeout
+        while loop.time() < end:
+            missing = [
+                agent
+                for agent in self.agents
+                if self.acks.sent.get(keys.member(agent, MEMBER), {}).get(outcomes_key(agent), 0)
+                > self.performed[agent]
+            ]
+            if not missing:
+                return
+            await asyncio.sleep(0.01)
+        self.ctx.log.warning("performed_missing", agents=",".join(missing))
 
     async def run(self) -> None:
         """Publish epoch 0 (or go on from the state file), then step until the run ends;
@@ -368,6 +400,8 @@ class WorldService:
         elif s.max_time > 0 and w.time >= s.max_time:
             reason = "time_limit"
         if reason:
+            if self.settings.lockstep:
+                await self.all_performed()
             self.finished = RunFinished(
                 reason=reason,
                 epoch=w.epoch,

@@ -26,7 +26,6 @@ from cbdi.launcher.scenario import (
     check_until,
     find_scenario,
     load_scenario,
-    performer_actions,
 )
 from cbdi.launcher.services import plan_services
 from cbdi.launcher.watch import TICK
@@ -226,14 +225,6 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
                     "the scenario has no BDI agent (only scripted ones), so nothing plans; "
                     "pick a BDI scenario (the -bdi ones and paper-7x7)",
                 )
-    if run.lockstep:
-        performed = performer_actions(scenario)
-        if performed:
-            raise ConfigError(
-                "--lockstep",
-                scenario.name,
-                f"performers act in real time ({', '.join(performed)}): run with --no-lockstep",
-            )
     return scenario
 
 

@@ -15,6 +15,7 @@ from cbdi import keys
 from cbdi.agentfile import read_agent_file
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import AGENT_KINDS, AgentEntry, Scenario
+from cbdi.robot import MEMBER as ROBOT_MEMBER
 
 __all__ = ["ServicePlan", "agent_of", "plan_services"]
 
@@ -81,6 +82,11 @@ def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
     for agent in scenario.agents:  # every component the world waits for, from epoch -1
         for component in AGENT_KINDS[agent.kind]:
             args += ["--member", keys.member(agent.name, component)]
+        # The robot's own process (cbdi.robot) performs some of its actions: in lockstep
+        # it is a member too, started by the user, waited for from epoch -1.
+        file = agent.agent_file
+        if run.lockstep and file is not None and read_agent_file(file, agent.name).performers:
+            args += ["--member", keys.member(agent.name, ROBOT_MEMBER)]
     return tuple(args)
 
 

@@ -168,7 +168,16 @@ def grants(
     """
     everything = (f"{ROOT}/**",)
     out = [
-        _service(WORLD, read=(keys.epoch_ack_all(), f"{ROOT}/{WORLD}/**", keys.ALIVE_ALL)),
+        _service(
+            WORLD,
+            # Performers' outcomes too: the run's trace folds them in (cbdi.robot).
+            read=(
+                keys.epoch_ack_all(),
+                f"{ROOT}/{WORLD}/**",
+                keys.ALIVE_ALL,
+                keys.agent_stream("*", PERFORMER, "outcomes"),
+            ),
+        ),
         _service(MONITOR, read=everything, query=_WORLD_ASKS),
         _service(
             LAUNCHER,
