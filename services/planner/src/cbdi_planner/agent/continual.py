@@ -26,6 +26,7 @@ from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.lines import (
     Line,
+    Purpose,
     Search,
     extend,
     forecast_report,
@@ -160,7 +161,7 @@ class ContinualPlanner(AgentTasks):
             req = replace(req, request_id=self.request.request_id, goal=goal)
             self.request = req
             if self.line is not None and self.line.steps:
-                return self._from_committed("revise", self.request_task(req.goal))
+                return self._from_committed(Purpose.REVISE, self.request_task(req.goal))
         executing = self.line
         self.request = replace(req, kind="start")
         self.line, self.last_forecast, self.repair_trigger = None, ("", "", ""), ""
@@ -169,7 +170,7 @@ class ContinualPlanner(AgentTasks):
             # from the state it leaves and follows it (the executor lets it end).
             task = self.task(req.goal)
             self.line = executing
-            self._from_committed("new", task, min_commit_steps=0)
+            self._from_committed(Purpose.NEW, task, min_commit_steps=0)
             search = self.search
             if search is not None:
                 if not reaches_goal(task, search.thread.state):
@@ -178,8 +179,10 @@ class ContinualPlanner(AgentTasks):
                 return [self._status(req.request_id, "searching")]
             self.line = None
         task = self.request_task(req.goal)
-        line = Line(self._plan_id(), "new", self.at_grid(self.now))
-        self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
+        line = Line(self._plan_id(), Purpose.NEW, self.at_grid(self.now))
+        self.search = Search(
+            self._thread(task, initial_state(task)), line, Purpose.NEW, req.request_id
+        )
         return [self._status(req.request_id, "searching")]
 
     def on_status(self, status: ActionStatus) -> None:
@@ -215,7 +218,8 @@ class ContinualPlanner(AgentTasks):
         if line is None or req is None or not line.steps:
             return []
         if self.search is not None and (
-            self.search.purpose in ("repair", "revise") or self.search.repairs is not None
+            self.search.purpose in (Purpose.REPAIR, Purpose.REVISE)
+            or self.search.repairs is not None
         ):
             return []  # a repair, or a new plan following the running step, is on its way
         try:
@@ -242,7 +246,7 @@ class ContinualPlanner(AgentTasks):
         if fc.kind == FAILS_LATER and f"{failed}:{fc.reason}" != self.repair_trigger:
             self.repair_trigger = f"{failed}:{fc.reason}"
             self.log("forecast_failure", plan=line.plan_id, step=failed, reason=fc.reason)
-            out += self._from_committed("repair", task)
+            out += self._from_committed(Purpose.REPAIR, task)
         elif (
             fc.kind == HOLDS
             and self.improve
@@ -256,12 +260,12 @@ class ContinualPlanner(AgentTasks):
             # may itself be replaced before its committed part runs.
             line.improved = True
             rest = line.makespan_after(fc.commitment.count)
-            out += self._from_committed("improve", task, improve_on=rest)
+            out += self._from_committed(Purpose.IMPROVE, task, improve_on=rest)
         return out
 
     def _from_committed(
         self,
-        purpose: str,
+        purpose: Purpose,
         task: Task,
         improve_on: float = math.inf,
         min_commit_steps: int | None = None,
@@ -285,7 +289,7 @@ class ContinualPlanner(AgentTasks):
         origin = self.at_grid(max([self.now, *ends]))
         new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
         thread: SearchThread | Improver
-        if purpose == "improve":
+        if purpose == Purpose.IMPROVE:
             thread = Improver(
                 task,
                 state,
@@ -353,7 +357,7 @@ class ContinualPlanner(AgentTasks):
                     isinstance(thread, SearchThread)
                     and thread.sent
                     and search.line is self.line
-                    and search.purpose == "new"
+                    and search.purpose == Purpose.NEW
                 ):
                     # Alg. 2 lines 11-14: the complete search starts over from the
                     # committed state, not after the greedy partial plans already out
@@ -392,7 +396,7 @@ class ContinualPlanner(AgentTasks):
         self.search, self.repair_trigger = None, ""
         self.last_forecast = ("", "", "")
         rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
-        if search.purpose == "new":
+        if search.purpose == Purpose.NEW:
             # A new plan must come: search again after what runs now.
             return rounds + self._again_from_committed(search, 0)
         return rounds
@@ -410,14 +414,14 @@ class ContinualPlanner(AgentTasks):
             task = self.task(request.goal)
         except (GoalError, PlannerError) as exc:
             return self._failed(search, str(exc))
-        self._from_committed("new", task, min_commit_steps=min_commit_steps, mode=mode)
+        self._from_committed(Purpose.NEW, task, min_commit_steps=min_commit_steps, mode=mode)
         if self.search is None:
             return self._failed(search, "the executing plan's committed part cannot be simulated")
         return []
 
     def _failed(self, search: Search, reason: str) -> list[Message]:
         self.search = None
-        if search.purpose in ("repair", "improve") and self.line is not None:
+        if search.purpose in (Purpose.REPAIR, Purpose.IMPROVE) and self.line is not None:
             self.log("repair_failed", plan=search.line.plan_id, reason=reason)
             return []  # the executing plan goes on; execution reports if it fails
         goal = self.request.goal if self.request is not None else []
@@ -425,7 +429,7 @@ class ContinualPlanner(AgentTasks):
 
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line
-        if (search.purpose != "new" or search.repairs is not None) and not line.steps:
+        if (search.purpose != Purpose.NEW or search.repairs is not None) and not line.steps:
             self.line = line  # the new line takes over from the committed point
             self.last_forecast = ("", "", "")
             self.repair_trigger = ""
