@@ -98,3 +98,13 @@ def test_stream_and_ack_tests() -> None:
     assert not keys.is_stream(keys.planner_plans("r2"), "scheduler", "plans")
     assert keys.is_ack(keys.epoch_ack("r2", "planner")) and keys.is_ack(keys.agent_ack("r2"))
     assert not keys.is_ack(keys.executor_status("r2"))
+
+
+def test_one_matcher_for_the_memory_bus_and_the_epoch_gate() -> None:
+    assert keys.matches(keys.agent_ack_all(), keys.agent_ack("r2"))
+    assert keys.matches(keys.ALL, keys.CLOCK) and keys.matches("cbdi/**", "cbdi")
+    assert keys.matches(keys.world_for_agent("r2"), keys.world_percepts("r2"))
+    assert not keys.matches(keys.world_for_agent("r2"), keys.world_percepts("r3"))
+    assert not keys.matches(keys.epoch_ack("*", "scheduler"), keys.epoch_ack("r2", "planner"))
+    with pytest.raises(ValueError, match="Zenoh"):
+        keys.matches(keys.ALL, "cbdi//x")

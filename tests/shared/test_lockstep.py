@@ -346,3 +346,11 @@ async def test_a_repeated_epoch_makes_a_member_send_its_ack_again() -> None:
     async with asyncio.timeout(5):
         _, again = await anext(heard)
     assert again == sent and member.sent[keys.epoch_ack("r1", "scheduler")] == 2
+
+
+def test_the_gate_hears_by_zenoh_rules_and_never_a_key_zenoh_refuses() -> None:
+    gate = EpochGate([keys.CLOCK, keys.world_for_agent("r1"), keys.epoch_ack("*", "scheduler")])
+    assert gate.hears(keys.CLOCK) and gate.hears(keys.world_percepts("r1"))
+    assert gate.hears(keys.epoch_ack("r2", "scheduler"))
+    assert not gate.hears(keys.world_percepts("r2"))
+    assert not gate.hears("cbdi//clock")  # an ack's garbage: nothing to wait for

@@ -20,6 +20,7 @@ Layout (documented in docs/protocol.md):
 
 from __future__ import annotations
 
+import functools
 import re
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
     "is_request_to",
     "is_stream",
     "launcher_stream",
+    "matches",
     "member",
     "monitor_stream",
     "owned",
@@ -370,6 +372,23 @@ def describe(key: str) -> dict[str, str]:
     if head in ("trace", "monitor", "launcher"):
         return {"agent": "", "component": head, "stream": "/".join(rest)}
     return {"agent": head, "component": rest[0] if rest else "", "stream": "/".join(rest[1:])}
+
+
+@functools.lru_cache(maxsize=4096)
+def matches(expr: str, key: str) -> bool:
+    """Tell whether the key expression `expr` matches `key`, by Zenoh's own rules.
+
+    The one key matcher: the memory bus delivers by it and the epoch gate counts by it,
+    so both hear what a subscriber on Zenoh hears. Raise ValueError for an expression
+    or key Zenoh refuses (an empty chunk, a `*` inside a chunk). Remembered: the same
+    few pairs come again every epoch.
+    """
+    import zenoh  # here, not at the top: a command that opens no session does not load it
+
+    try:
+        return bool(zenoh.KeyExpr(expr).intersects(zenoh.KeyExpr(key)))
+    except zenoh.ZError as exc:
+        raise ValueError(f"not a Zenoh key expression: {expr!r} or {key!r} ({exc})") from exc
 
 
 def trace(key: str) -> str:
