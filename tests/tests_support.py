@@ -1,7 +1,9 @@
-"""Helpers for tests that run real processes (importable as `tests_support`)."""
+"""Helpers for tests that run real processes, or services on the memory bus (importable
+as `tests_support`)."""
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import signal
@@ -70,6 +72,16 @@ def wait_for(predicate: object, timeout: float = 90.0, what: str = "condition") 
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.05)
+
+
+async def settle(turns: int = 20) -> None:
+    """Let the loop's other tasks run until they wait: `turns` passes, no wall-clock time.
+
+    For code on the memory bus, which delivers at once: there a sleep only ever meant
+    "after what is ready has run", and a loaded machine cannot make this one too short.
+    """
+    for _ in range(turns):
+        await asyncio.sleep(0)
 
 
 CBDI = str(BIN / "cbdi") if (BIN / "cbdi").exists() else "cbdi"

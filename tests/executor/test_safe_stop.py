@@ -25,6 +25,7 @@ from cbdi.wire import decode, encode
 from cbdi.wire.agent import ExecutorState, ExecutorStop, PartialPlan, PlanStep
 from cbdi.wire.world import ActionOutcome, ActionReply, ActionRequest
 from cbdi_executor.service import ExecutorSettings, executor_main
+from tests_support import settle
 
 BELIEFS = BeliefSet.of([fact("free", f"c_{x}_0") for x in range(1, 4)])
 
@@ -123,7 +124,7 @@ async def test_a_stopped_executor_starts_nothing_until_resumed(
 
 class Slow:
     async def perform(self, call: ActionCall) -> Outcome:
-        await asyncio.sleep(60)
+        await asyncio.Event().wait()  # until stopped
         return Outcome.success()
 
 
@@ -132,7 +133,7 @@ async def test_a_performer_stops_what_it_carries_out_at_a_safe_stop() -> None:
     outcomes = messages(bus, outcomes_key("robot1"), ActionOutcome, LogSink())
     served = asyncio.create_task(serve_performer(bus, "robot1", "charge", Slow()))
     try:
-        await asyncio.sleep(0.05)
+        await settle()  # the performer serves
         call = ActionRequest(
             agent="robot1", action="charge", request_id="r1", args=["robot1"], duration=60
         )

@@ -14,6 +14,7 @@ from cbdi.wire.agent import ActionStatus, PartialPlan
 from cbdi.wire.planner import ForecastReport, SearchRequest, SearchRound, SearchStatus
 from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
+from cbdi_planner.agent.lines import Purpose
 from cbdi_planner.agent.transient import Transients
 from cbdi_planner.pddl import parse_domain
 
@@ -108,17 +109,31 @@ def test_a_forecast_failure_after_the_committed_part_starts_a_repair() -> None:
     report = next(m for m in out if isinstance(m, ForecastReport))
     assert report.kind == "fails_after_committed" and report.failed_step == f"{first.plan_id}-2"
     assert report.committed == f"{first.plan_id}-1"
-    assert core.search is not None and core.search.purpose == "repair"
+    assert core.search is not None and core.search.purpose is Purpose.REPAIR
     repair = [m for m in drain(core) if isinstance(m, PartialPlan)]
     # The person blocks the only way: no repair exists, the executing plan goes on.
     assert repair == [] and core.line is not None and core.line.plan_id == first.plan_id
+
+
+def test_purposes_go_out_as_the_words_recordings_hold() -> None:
+    """Plans and rounds carry the purpose's word, a plain string (the monitor counts by it)."""
+    assert [p.value for p in Purpose] == ["new", "repair", "revise", "improve"]
+    core = planner()
+    core.on_request(request())
+    said = [m.purpose for m in drain(core) if isinstance(m, PartialPlan | SearchRound)]
+    assert said and all(type(p) is str and p == "new" for p in said)
+    core = planner()
+    run_first_steps(core, 1)
+    core.on_request(request("revise", ("p2",)))
+    said = [m.purpose for m in drain(core) if isinstance(m, PartialPlan | SearchRound)]
+    assert said and all(type(p) is str and p == "revise" for p in said)
 
 
 def test_a_revised_goal_replaces_the_plan_after_the_committed_step() -> None:
     core = planner()
     first = run_first_steps(core, 1)
     assert core.on_request(request("revise", ("p2",))) == []
-    assert core.search is not None and core.search.purpose == "revise"
+    assert core.search is not None and core.search.purpose is Purpose.REVISE
     plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
     assert plans and plans[0].plan_id != first.plan_id
     assert plans[0].applies_after == f"{first.plan_id}-1" == plans[0].baseline

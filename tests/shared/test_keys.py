@@ -68,3 +68,43 @@ def test_scoped_request_keys_name_who_may_ask() -> None:
     assert keys.request_group(keys.agent_request("robot1", "operator")) == "operator"
     assert keys.request_group(keys.component_rpc("robot1", "scheduler", "request")) == ""
     assert keys.request_group("cbdi/robot1/scheduler/rpc/state/x") == ""
+
+
+def test_the_wide_expressions_keep_their_strings() -> None:
+    assert keys.ALL == "cbdi/**"
+    assert keys.owned("robot1/executor") == "cbdi/robot1/executor/**"
+    assert keys.owned("robot1") == "cbdi/robot1/**"
+    assert keys.trace(keys.owned("world")) == "cbdi/trace/world/**"
+    assert keys.service_rpc("robot1/scheduler", "**") == "cbdi/robot1/scheduler/rpc/**"
+    assert keys.advanced(keys.ALL, "sub/**") == "cbdi/**/@adv/sub/**"
+    assert keys.agent_request("robot1", "**") == "cbdi/robot1/scheduler/rpc/request/**"
+
+
+def test_traced_requests_and_replies() -> None:
+    act = keys.world_rpc("act")
+    assert keys.trace_request(act) == "cbdi/trace/world/rpc/act/request"
+    assert keys.trace_reply(act) == "cbdi/trace/world/rpc/act/reply"
+    assert keys.traced_request(keys.trace_request(act)) == act
+    assert keys.traced_request(keys.trace_reply(act)) == ""
+    assert keys.traced_request(act) == ""
+    pick = keys.component_rpc("robot1", "performer", "pick")
+    assert keys.is_request_to(keys.traced_request(keys.trace_request(pick)), "performer")
+    assert not keys.is_request_to(act, "performer")
+    assert not keys.is_request_to(keys.agent_stream("robot1", "performer", "outcomes"), "performer")
+
+
+def test_stream_and_ack_tests() -> None:
+    assert keys.is_stream(keys.scheduler_plans("r2"), "scheduler", "plans")
+    assert not keys.is_stream(keys.planner_plans("r2"), "scheduler", "plans")
+    assert keys.is_ack(keys.epoch_ack("r2", "planner")) and keys.is_ack(keys.agent_ack("r2"))
+    assert not keys.is_ack(keys.executor_status("r2"))
+
+
+def test_one_matcher_for_the_memory_bus_and_the_epoch_gate() -> None:
+    assert keys.matches(keys.agent_ack_all(), keys.agent_ack("r2"))
+    assert keys.matches(keys.ALL, keys.CLOCK) and keys.matches("cbdi/**", "cbdi")
+    assert keys.matches(keys.world_for_agent("r2"), keys.world_percepts("r2"))
+    assert not keys.matches(keys.world_for_agent("r2"), keys.world_percepts("r3"))
+    assert not keys.matches(keys.epoch_ack("*", "scheduler"), keys.epoch_ack("r2", "planner"))
+    with pytest.raises(ValueError, match="Zenoh"):
+        keys.matches(keys.ALL, "cbdi//x")

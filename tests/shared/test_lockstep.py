@@ -20,6 +20,7 @@ from cbdi.wire.world import (
     WorldInfo,
     WorldInfoRequest,
 )
+from tests_support import settle
 
 BELIEFS = "cbdi/r1/scheduler/beliefs"
 PLANS = "cbdi/r1/scheduler/plans"
@@ -265,9 +266,9 @@ async def test_a_member_sends_its_latest_ack_again_when_the_world_comes_back() -
     await send_ack(member, "r1", "executor", 7)
     _, sent = await anext(heard)
     resend = asyncio.create_task(resend_latest_ack(member, "r1", "executor"))
-    await asyncio.sleep(0.01)  # the world it knows: nothing sent
+    await settle()  # the world it knows: nothing sent
     await token.close()  # killed ...
-    await asyncio.sleep(0.01)
+    await settle()
     await world.declare_token(keys.alive("world"))  # ... and back
     async with asyncio.timeout(5):
         _, again = await anext(heard)
@@ -298,7 +299,7 @@ async def test_a_world_not_up_yet_is_asked_again_not_taken_for_none(
     world = asyncio.create_task(
         serve(network.bus(), keys.world_rpc("info"), WorldInfoRequest, answer, LogSink())
     )
-    await asyncio.sleep(0.01)
+    await settle()
     early = Stamped(PLANS, 1, 1, beliefs(0))
     assert await step.put(early) == []  # kept for the first tick, not handled at once
     assert step.lockstep_member is True and step.early == [early]
@@ -345,3 +346,11 @@ async def test_a_repeated_epoch_makes_a_member_send_its_ack_again() -> None:
     async with asyncio.timeout(5):
         _, again = await anext(heard)
     assert again == sent and member.sent[keys.epoch_ack("r1", "scheduler")] == 2
+
+
+def test_the_gate_hears_by_zenoh_rules_and_never_a_key_zenoh_refuses() -> None:
+    gate = EpochGate([keys.CLOCK, keys.world_for_agent("r1"), keys.epoch_ack("*", "scheduler")])
+    assert gate.hears(keys.CLOCK) and gate.hears(keys.world_percepts("r1"))
+    assert gate.hears(keys.epoch_ack("r2", "scheduler"))
+    assert not gate.hears(keys.world_percepts("r2"))
+    assert not gate.hears("cbdi//clock")  # an ack's garbage: nothing to wait for

@@ -12,6 +12,7 @@ from cbdi.bus.typed import Stamped
 from cbdi.launcher.summary import ACTS, RunCounts, RunSummary, counted_keys
 from cbdi.wire.agent import ActionStatus
 from cbdi.wire.world import ActionRequest, Tick
+from tests_support import settle
 
 A = "robot1"
 
@@ -96,7 +97,7 @@ async def test_the_counts_wait_for_what_the_run_says_was_sent() -> None:
     feed.put_nowait(tick(1, 0))
     waiting = asyncio.create_task(counts.cover(sent, counted_keys_, timeout=5))
     feed.put_nowait(running(1, "p1-1"))
-    await asyncio.sleep(0.01)
+    await settle()
     assert not waiting.done()
     feed.put_nowait(running(2, "p1-2"))
     assert await waiting == {}

@@ -80,7 +80,7 @@ class EpochGate:
     def __init__(
         self, key_exprs: Sequence[str], sender_of: Callable[[str], str] = default_sender
     ) -> None:
-        self.key_exprs = [e.split("/") for e in key_exprs]  # what this component hears
+        self.key_exprs = list(key_exprs)  # what this component hears
         self.sender_of = sender_of
         self.senders: dict[str, _Sender] = {}
         self.changed = asyncio.Condition()
@@ -198,8 +198,10 @@ class EpochGate:
 
     def hears(self, key: str) -> bool:
         """Whether this component subscribes to `key` (only those counts are waited for)."""
-        chunks = key.split("/")
-        return any(_matches(e, chunks) for e in self.key_exprs)
+        try:
+            return any(keys.matches(e, key) for e in self.key_exprs)
+        except ValueError:
+            return False  # not a key (an ack's garbage): nobody can send on it
 
     async def wait(self, needs: Sequence[Need], timeout: float | None) -> GateResult:
         """Wait until every need is met (or the timeout), then release what they cover."""
@@ -277,14 +279,3 @@ def _in_order(items: list[Stamped]) -> list[Stamped]:
     if any(not i.order for i in items):
         return items
     return sorted(items, key=lambda i: i.order)
-
-
-def _matches(expr: list[str], key: list[str]) -> bool:
-    """Match key chunks against a key expression's (`*` one chunk, `**` any number)."""
-    if not expr:
-        return not key
-    if expr[0] == "**":
-        return any(_matches(expr[1:], key[i:]) for i in range(len(key) + 1))
-    if not key:
-        return False
-    return (expr[0] == "*" or expr[0] == key[0]) and _matches(expr[1:], key[1:])

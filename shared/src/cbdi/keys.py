@@ -12,16 +12,20 @@ Layout (documented in docs/protocol.md):
 - liveliness tokens: `cbdi/alive/<service-id>` where the service id is `world`,
   `monitor`, or `<agent>/<component>`
 - heartbeats: `cbdi/heartbeat/<service-id>` (each service's event loop, wall clock)
-- request tracing for recorders: `cbdi/trace/<request key>`
+- request tracing for recorders: `cbdi/trace/<request key>/request` and `.../reply`
+- every key of a service id or agent: `cbdi/<name>/**`; of the run: `cbdi/**`; Zenoh's
+  advanced publishers and subscribers use `<key expression>/@adv/...` beside them
 - the launcher's word for recorders: `cbdi/launcher/<stream>` (`run`: what it started)
 """
 
 from __future__ import annotations
 
+import functools
 import re
 
 __all__ = [
     "ALIVE_ALL",
+    "ALL",
     "CLOCK",
     "EVENTS",
     "HEARTBEAT_ALL",
@@ -29,6 +33,7 @@ __all__ = [
     "SNAPSHOT",
     "STATS",
     "WORLD",
+    "advanced",
     "agent_ack",
     "agent_ack_all",
     "agent_request",
@@ -42,10 +47,15 @@ __all__ = [
     "executor_arrested",
     "executor_status",
     "heartbeat",
+    "is_ack",
     "is_heartbeat",
+    "is_request_to",
+    "is_stream",
     "launcher_stream",
+    "matches",
     "member",
     "monitor_stream",
+    "owned",
     "planner_forecasts",
     "planner_plans",
     "planner_requests",
@@ -60,7 +70,11 @@ __all__ = [
     "scheduler_plans",
     "service_id",
     "service_of_alive",
+    "service_rpc",
     "trace",
+    "trace_reply",
+    "trace_request",
+    "traced_request",
     "validate_name",
     "world_act",
     "world_for_agent",
@@ -73,6 +87,7 @@ __all__ = [
 
 ROOT = "cbdi"
 WORLD = "world"
+ALL = f"{ROOT}/**"  # every key of cbdi (what a recorder hears)
 ALIVE_ALL = f"{ROOT}/alive/**"
 HEARTBEAT_ALL = f"{ROOT}/heartbeat/**"
 
@@ -156,6 +171,35 @@ def request_group(key: str) -> str:
     return ""
 
 
+def owned(name: str) -> str:
+    """Return the key expression of every key of a service id or an agent: `cbdi/<name>/**`.
+
+    A service's (`world`, `robot1/executor`): its streams, errors and request endpoints;
+    an agent's (`robot1`): those of all its services.
+    """
+    return f"{ROOT}/{name}/**"
+
+
+def service_rpc(service: str, name: str) -> str:
+    """Return the key of a request endpoint of a service id (`**`: all its endpoints)."""
+    return f"{ROOT}/{service}/rpc/{name}"
+
+
+def is_request_to(key: str, component: str) -> bool:
+    """Tell whether `key` is a request endpoint of an agent's `component` (`component_rpc`)."""
+    parts = key.split("/")
+    return len(parts) == 5 and parts[0] == ROOT and parts[2] == component and parts[3] == "rpc"
+
+
+def advanced(expr: str, tail: str) -> str:
+    """Return the key expression of Zenoh's advanced pub/sub keys of `expr` (`@adv/<tail>`).
+
+    An advanced publisher's cache and liveliness token and an advanced subscriber's
+    recovery queries live under these; access rules must name them beside `expr`.
+    """
+    return f"{expr}/@adv/{tail}"
+
+
 def agent_stream(agent: str, component: str, stream: str) -> str:
     """Return `cbdi/<agent>/<component>/<stream>`."""
     return f"{ROOT}/{agent}/{component}/{stream}"
@@ -229,6 +273,16 @@ def executor_status(agent: str) -> str:
 def executor_arrested(agent: str) -> str:
     """Return the key on which the executor reports that it stopped (early arrest)."""
     return agent_stream(agent, "executor", "arrested")
+
+
+def is_stream(key: str, component: str, stream: str) -> bool:
+    """Tell whether `key` is some agent's `component` `stream` (`agent_stream`)."""
+    return key.endswith(f"/{component}/{stream}")
+
+
+def is_ack(key: str) -> bool:
+    """Tell whether `key` is an epoch ack's, of any agent and component (`epoch_ack`)."""
+    return key.endswith("/ack")
 
 
 def agent_ack(agent: str) -> str:
@@ -320,6 +374,44 @@ def describe(key: str) -> dict[str, str]:
     return {"agent": head, "component": rest[0] if rest else "", "stream": "/".join(rest[1:])}
 
 
+@functools.lru_cache(maxsize=4096)
+def matches(expr: str, key: str) -> bool:
+    """Tell whether the key expression `expr` matches `key`, by Zenoh's own rules.
+
+    The one key matcher: the memory bus delivers by it and the epoch gate counts by it,
+    so both hear what a subscriber on Zenoh hears. Raise ValueError for an expression
+    or key Zenoh refuses (an empty chunk, a `*` inside a chunk). Remembered: the same
+    few pairs come again every epoch.
+    """
+    import zenoh  # here, not at the top: a command that opens no session does not load it
+
+    try:
+        return bool(zenoh.KeyExpr(expr).intersects(zenoh.KeyExpr(key)))
+    except zenoh.ZError as exc:
+        raise ValueError(f"not a Zenoh key expression: {expr!r} or {key!r} ({exc})") from exc
+
+
 def trace(key: str) -> str:
     """Return the trace key on which the request helper mirrors requests and replies."""
     return f"{ROOT}/trace/{key.removeprefix(ROOT + '/')}"
+
+
+def trace_request(key: str) -> str:
+    """Return the key on which a request asked on `key` is mirrored for recorders."""
+    return f"{trace(key)}/request"
+
+
+def trace_reply(key: str) -> str:
+    """Return the key on which the reply to a request asked on `key` is mirrored."""
+    return f"{trace(key)}/reply"
+
+
+def traced_request(key: str) -> str:
+    """Return the key asked on whose request `key` mirrors (inverse of `trace_request`).
+
+    '' when `key` mirrors no request.
+    """
+    prefix, suffix = f"{ROOT}/trace/", "/request"
+    if key.startswith(prefix) and key.endswith(suffix) and len(key) > len(prefix + suffix):
+        return f"{ROOT}/{key[len(prefix) : -len(suffix)]}"
+    return ""

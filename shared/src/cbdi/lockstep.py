@@ -219,9 +219,7 @@ def ack(agent: str, component: str, epoch: int, stage: str, bus: Bus) -> EpochAc
     # Acks and heartbeats (wall-clock, as many as the machine's pace gives) say nothing
     # of what the epoch's inputs are.
     sent = {
-        k: n
-        for k, n in sorted(bus.sent.items())
-        if not k.endswith("/ack") and not keys.is_heartbeat(k)
+        k: n for k, n in sorted(bus.sent.items()) if not keys.is_ack(k) and not keys.is_heartbeat(k)
     }
     if len(sent) > MAX_SENT_KEYS:
         sent = dict(list(sent.items())[:MAX_SENT_KEYS])

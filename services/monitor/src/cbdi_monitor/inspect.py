@@ -20,6 +20,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from cbdi import keys
 from cbdi.errors import CbdiError, WireError
 from cbdi.plugins import domain_counters
 from cbdi.tally import MESSAGES, SCHEMAS, PlannerTally
@@ -31,7 +32,7 @@ from cbdi_monitor.reader import RecordedMessage, read_messages
 
 __all__ = ["AgentReport", "Inspection", "inspect_messages", "main"]
 
-ACT_REQUEST = "cbdi/trace/world/rpc/act/request"
+ACT_REQUEST = keys.trace_request(keys.world_rpc("act"))
 
 
 @dataclass
@@ -131,13 +132,13 @@ def _account(report: Inspection, m: RecordedMessage, now: float) -> float:
 
 def _action_request(key: str) -> bool:
     """Whether `key` mirrors an action request: to the world, or to a performer."""
-    performer = key.startswith("cbdi/trace/") and "/performer/rpc/" in key
-    return key == ACT_REQUEST or (performer and key.endswith("/request"))
+    asked = keys.traced_request(key)
+    return key == ACT_REQUEST or keys.is_request_to(asked, "performer")
 
 
 def _agent_message(report: Inspection, m: RecordedMessage) -> None:
     """Count what the agents' own services said (plans, arrests, desires)."""
-    if m.schema == "cbdi.agent.PartialPlan/1" and m.key.endswith("/scheduler/plans"):
+    if m.schema == "cbdi.agent.PartialPlan/1" and keys.is_stream(m.key, "scheduler", "plans"):
         _agent(report, decode(m.payload, PartialPlan, m.key).agent).plans += 1
     elif m.schema == "cbdi.agent.ArrestReport/1":
         _agent(report, decode(m.payload, ArrestReport, m.key).agent).arrests += 1

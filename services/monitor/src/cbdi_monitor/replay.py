@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import uvloop
 import zenoh
 
+from cbdi import keys as cbdi_keys
 from cbdi.bus.zenoh_bus import open_bus
 from cbdi.clock import Clock, WallClock
 from cbdi.errors import CbdiError, ConfigError
@@ -39,7 +40,7 @@ class ReplaySettings(ServiceSettings):
 
     file: str = field(default="", metadata={"help": "the MCAP recording"})
     speed: float = field(default=1.0, metadata={"help": "time factor; 0 = as fast as possible"})
-    keys: str = field(default="cbdi/**", metadata={"help": "replay only keys matching EXPR"})
+    keys: str = field(default=cbdi_keys.ALL, metadata={"help": "replay only keys matching EXPR"})
     check: bool = field(
         default=False,
         metadata={"help": "replay --agent's inputs in this process and compare its decisions"},

@@ -230,7 +230,7 @@ class RerunLogger:
         )
 
     def on_request(self, m: RecordedMessage) -> None:
-        if not m.key.endswith("/act/request"):
+        if keys.traced_request(m.key) != keys.world_rpc("act"):
             return
         rr, req = self.rr, decode(m.payload, ActionRequest, m.key)
         text = f"requests {req.action}" + (f" to {list(req.target)}" if req.target else "")
@@ -261,7 +261,7 @@ class RerunLogger:
 
     def on_alive(self, m: RecordedMessage) -> None:
         rr, event = self.rr, decode(m.payload, Liveliness, m.key)
-        service = event.key.removeprefix("cbdi/alive/")
+        service = keys.service_of_alive(event.key)
         self.log(
             "health",
             rr.TextLog(

@@ -25,7 +25,7 @@ from cbdi_monitor.resume import Recorded, recorded_before
 
 __all__ = ["MonitorSettings", "monitor_main"]
 
-ALL = f"{keys.ROOT}/**"
+ALL = keys.ALL
 DRAIN_LIMIT = 30.0  # seconds a stopping monitor may spend writing its backlog
 
 

@@ -128,7 +128,7 @@ async def _live(rrd: str, bus_config: BusConfig, seconds: float) -> int:
     bus = await open_bus(bus_config)
     count = 0
     try:
-        sub = bus.subscribe(f"{keys.ROOT}/**")
+        sub = bus.subscribe(keys.ALL)
         async with asyncio.timeout(seconds or None):
             async for s in sub:
                 logger.handle(

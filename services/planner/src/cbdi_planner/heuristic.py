@@ -16,6 +16,7 @@ import copy
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from cbdi_planner.core import compiled
@@ -43,6 +44,21 @@ class Estimate:
     value: int
     helpful: frozenset[tuple[int, int]]
     duration: float = 0.0
+
+
+@dataclass(slots=True)
+class _Layers:
+    """What `RelaxedPlanGraph._explore` has built so far.
+
+    Each fact's first layer and the op that first added it (-1: not yet), each op's
+    layer (-1: not fired), and the numeric intervals `[lo, hi]` the fired ops widened.
+    """
+
+    level: list[int]
+    achiever: list[int]
+    op_level: list[int]
+    lo: list[float]
+    hi: list[float]
 
 
 class RelaxedPlanGraph:
@@ -228,6 +244,7 @@ class RelaxedPlanGraph:
     ) -> tuple[list[int], list[int], list[int]] | None:
         """Build the graph layer by layer until every goal is reached (None: never).
 
+        Return each fact's first layer and first achiever, and each op's layer.
         Precondition counters make each layer cost only the operators its new facts
         touch; an operator whose numeric condition cannot hold yet waits. Ops fire in
         the order they became ready, so the first achiever of a fact is always the same.
@@ -237,17 +254,20 @@ class RelaxedPlanGraph:
             facts = state.facts
             packed = facts.to_bytes((facts.bit_length() + 7) // 8, "little")
             return self._core.explore(packed, state.open, state.til, state.nums, goals)
-        level = [-1] * self.size
-        achiever = [-1] * self.size
-        op_level = [-1] * len(self.ops)
+        layers = _Layers(
+            [-1] * self.size,
+            [-1] * self.size,
+            [-1] * len(self.ops),
+            list(state.nums),
+            list(state.nums),
+        )
+        level = layers.level
         counts = self.counts[:]
-        users, op_num_pre, op_num_eff = self.users, self.op_num_pre, self.op_num_eff
         frontier = list(_bits(state.facts))
         frontier += [self.pending + a for a in state.open]
         for f in frontier:
             level[f] = 0
         missing = [g for g in set(goals) if level[g] < 0]
-        lo, hi = list(state.nums), list(state.nums)
         ready = self.free + self.til_ops[state.til :]
         extra = self._running_ends(state, level, counts, ready)
         # A running action's end may count facts no op counts otherwise: then every
@@ -256,53 +276,92 @@ class RelaxedPlanGraph:
         waiting: list[int] = []
         depth = 0
         while missing:
-            for f in frontier:
-                for k in users[f]:
-                    left = counts[k] - 1
-                    counts[k] = left
-                    if not left:
-                        ready.append(k)
-                if extra:
-                    for k in extra.get(f, ()):
-                        counts[k] -= 1
-                        if counts[k] == 0:
-                            ready.append(k)
-            held: list[int] = []
-            acting: list[int] = []  # ops with numeric effects, applied after the layer
-            due, frontier, ready = (waiting + ready if waiting else ready), [], []
-            fired, next_level = False, depth + 1
-            for k in due:
-                if op_level[k] >= 0:
-                    continue
-                numeric, nxt, live, quiet = fire[k]
-                if numeric:
-                    if op_num_pre[k] and not all(may_hold(c, lo, hi) for c in op_num_pre[k]):
-                        held.append(k)
-                        continue
-                    if op_num_eff[k]:
-                        acting.append(k)
-                op_level[k] = depth
-                fired = True
-                if nxt >= 0:
-                    ready.append(nxt)
-                for f in live:
-                    if level[f] < 0:
-                        level[f] = next_level
-                        achiever[f] = k
-                        frontier.append(f)
-                for f in quiet:
-                    if level[f] < 0:
-                        level[f] = next_level
-                        achiever[f] = k
-            if not fired:
+            self._count_down(frontier, counts, extra, ready)
+            fired = self._fire_layer(layers, waiting + ready if waiting else ready, depth, fire)
+            if fired is None:
                 return None
-            for k in acting:
-                for effect in op_num_eff[k]:
-                    widen(effect, lo, hi)
-            waiting = held
-            depth = next_level
+            frontier, ready, waiting = fired
+            depth += 1
             missing = [g for g in missing if level[g] < 0]
-        return level, achiever, op_level
+        return level, layers.achiever, layers.op_level
+
+    def _count_down(
+        self,
+        frontier: list[int],
+        counts: list[int],
+        extra: dict[int, list[int]],
+        ready: list[int],
+    ) -> None:
+        """Count the facts of `frontier` off the ops needing them; one needing none is ready.
+
+        `extra`: the chained end ops of running actions and the facts they still need
+        (`_running_ends`), which `users` does not list.
+        """
+        users = self.users
+        for f in frontier:
+            for k in users[f]:
+                left = counts[k] - 1
+                counts[k] = left
+                if not left:
+                    ready.append(k)
+            if extra:
+                for k in extra.get(f, ()):
+                    counts[k] -= 1
+                    if counts[k] == 0:
+                        ready.append(k)
+
+    def _fire_layer(
+        self,
+        layers: _Layers,
+        due: list[int],
+        depth: int,
+        fire: Sequence[tuple[bool, int, tuple[int, ...], tuple[int, ...]]],
+    ) -> tuple[list[int], list[int], list[int]] | None:
+        """Fire at layer `depth` the ops of `due` not fired yet (None: not one could).
+
+        Return the facts first reached (the next frontier), the ops made ready (the
+        chained ends of the starts fired) and the ops held back because their numeric
+        condition cannot hold yet. Numeric effects widen the intervals only after the
+        whole layer, so no op of a layer sees the effect of another.
+        """
+        level, achiever, op_level = layers.level, layers.achiever, layers.op_level
+        op_num_pre, op_num_eff = self.op_num_pre, self.op_num_eff
+        frontier: list[int] = []
+        ready: list[int] = []
+        held: list[int] = []
+        acting: list[int] = []  # ops with numeric effects, applied after the layer
+        fired, next_level = False, depth + 1
+        for k in due:
+            if op_level[k] >= 0:
+                continue
+            numeric, nxt, live, quiet = fire[k]
+            if numeric:
+                if op_num_pre[k] and not all(
+                    may_hold(c, layers.lo, layers.hi) for c in op_num_pre[k]
+                ):
+                    held.append(k)
+                    continue
+                if op_num_eff[k]:
+                    acting.append(k)
+            op_level[k] = depth
+            fired = True
+            if nxt >= 0:
+                ready.append(nxt)
+            for f in live:
+                if level[f] < 0:
+                    level[f] = next_level
+                    achiever[f] = k
+                    frontier.append(f)
+            for f in quiet:
+                if level[f] < 0:
+                    level[f] = next_level
+                    achiever[f] = k
+        if not fired:
+            return None
+        for k in acting:
+            for effect in op_num_eff[k]:
+                widen(effect, layers.lo, layers.hi)
+        return frontier, ready, held
 
     def _running_ends(
         self, state: State, level: list[int], counts: list[int], ready: list[int]

@@ -381,7 +381,8 @@ def scheduler_main(mind: Mind, settings: SchedulerSettings) -> ServiceMain:
         service = SchedulerService(ctx, mind, settings.ack_timeout)
         stream = sequenced_inputs(ctx.bus, service.input_keys(), INPUTS, ctx)
         rpc = keys.component_rpc(mind.agent, "scheduler", "request")
-        asked = serve(ctx.bus, rpc + "/**", AgentRequest, service.on_request, ctx, trace_as=rpc)
+        every = keys.agent_request(mind.agent, "**")
+        asked = serve(ctx.bus, every, AgentRequest, service.on_request, ctx, trace_as=rpc)
         ctx.start(asked, name="requests")  # `**`: the bare key and `.../request/<group>`
         state = keys.component_rpc(mind.agent, "scheduler", "state")
         ctx.start(

@@ -2,7 +2,8 @@
 
 Several `MemoryBus` endpoints attached to one `MemoryNetwork` see each other's
 publications, requests and tokens, as services on one Zenoh network would. Delivery is
-immediate and in publication order. Key matching uses Zenoh's own key expression rules.
+immediate and in publication order. Key matching uses Zenoh's own key expression rules
+(`cbdi.keys.matches`).
 """
 
 from __future__ import annotations
@@ -14,16 +15,11 @@ from collections import Counter
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
 
-import zenoh
-
 from cbdi.bus.base import AliveEvent, Handler, Sample
 from cbdi.errors import BusClosedError, RequestTimeoutError
+from cbdi.keys import matches as _matches
 
 __all__ = ["MemoryBus", "MemoryNetwork"]
-
-
-def _matches(key_expr: str, key: str) -> bool:
-    return bool(zenoh.KeyExpr(key_expr).intersects(zenoh.KeyExpr(key)))
 
 
 @dataclass

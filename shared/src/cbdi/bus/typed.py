@@ -198,13 +198,12 @@ async def serve(
     """
 
     async def answer(key: str, payload: bytes) -> bytes:
-        traced = keys.trace(trace_as or key)
         if trace:
-            await bus.publish(traced + "/request", payload)
+            await bus.publish(keys.trace_request(trace_as or key), payload)
         reply = await _reply_to(key, payload, request_cls, handler, sink)
         encoded = encode(reply)
         if trace:
-            await bus.publish(traced + "/reply", encoded)
+            await bus.publish(keys.trace_reply(trace_as or key), encoded)
         return encoded
 
     await bus.serve(key_expr, answer)

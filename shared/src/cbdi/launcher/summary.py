@@ -64,7 +64,7 @@ class RunSummary:
         return self.result in ("done", "time_limit")
 
 
-ACTS = keys.trace(keys.world_rpc("act")) + "/request"  # the world mirrors what it serves
+ACTS = keys.trace_request(keys.world_rpc("act"))  # the world mirrors what it serves
 
 
 def counted_keys(agents: list[str]) -> frozenset[str]:

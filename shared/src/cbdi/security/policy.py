@@ -41,7 +41,6 @@ VIEWER = "viewer"  # `cbdi view --live` and `--text`: reads everything, writes n
 PERFORMER = "performer"  # per agent: its performers and sensors (`cbdi.performer`, `cbdi.sensor`)
 HUB_GRANT, HUB_SUBJECT = "router", "hub"  # the grant a joined hub router has, at the joiner
 OPERATOR_GROUP, SENSOR_GROUP = "operator", "sensors"  # the groups `cbdi ctl` and sensors ask under
-ROOT = keys.ROOT
 
 _PUT = ("put", "delete")
 _DECLARATIONS = (
@@ -84,12 +83,12 @@ def user_of(identity: str) -> str:
 
 def _service(service: str, **more: tuple[str, ...]) -> Grant:
     """A service's own keys: its streams and errors, heartbeat, traces, token, endpoints."""
-    own = f"{ROOT}/{service}/**"
-    publish = (own, keys.heartbeat(service), f"{ROOT}/trace/{service}/**")
+    own = keys.owned(service)
+    publish = (own, keys.heartbeat(service), keys.trace(own))
     return Grant(
         service,
         publish=publish + more.pop("publish", ()),
-        serve=(f"{ROOT}/{service}/rpc/**", *more.pop("serve", ())),
+        serve=(keys.service_rpc(service, "**"), *more.pop("serve", ())),
         tokens=(keys.alive(service),),
         **more,
     )
@@ -99,7 +98,7 @@ def _agent_reads(agent: str) -> tuple[str, ...]:
     """What every service of `agent` reads: its own agent's keys, the world's shared
     streams and those addressed to it, its group's claims and acks, who is alive."""
     return (
-        f"{ROOT}/{agent}/**",
+        keys.owned(agent),
         keys.CLOCK,
         keys.world_stream("info"),
         keys.EVENTS,
@@ -127,7 +126,7 @@ def agent_grants(agent: str, components: Iterable[str], group: str = "") -> list
         act = (keys.world_act(agent),) if component == "executor" else ()
         ask = peers if component == "scheduler" else ""
         group_asks = (keys.agent_request("*", ask),) if ask else ()
-        asks: tuple[str, ...] = (*_WORLD_ASKS, f"{ROOT}/{agent}/**", *act, *group_asks)
+        asks: tuple[str, ...] = (*_WORLD_ASKS, keys.owned(agent), *act, *group_asks)
         out.append(
             _service(
                 keys.service_id(component, agent),
@@ -166,14 +165,14 @@ def grants(
     nothing; `operator` (`cbdi ctl`) asks any agent under group `operator`, and reads who
     is alive, the world's public streams and desire events.
     """
-    everything = (f"{ROOT}/**",)
+    everything = (keys.ALL,)
     out = [
         _service(
             WORLD,
             # Performers' outcomes too: the run's trace folds them in (cbdi.robot).
             read=(
                 keys.epoch_ack_all(),
-                f"{ROOT}/{WORLD}/**",
+                keys.owned(WORLD),
                 keys.ALIVE_ALL,
                 keys.agent_stream("*", PERFORMER, "outcomes"),
             ),
@@ -209,20 +208,20 @@ def grants(
 # router's own identity, with which it joins another host's router and carries all of
 # its side's traffic.
 COMPOSE_GRANTS = (
-    _service("wait", read=(f"{ROOT}/**",), query=(keys.world_rpc("stats"),)),
+    _service("wait", read=(keys.ALL,), query=(keys.world_rpc("stats"),)),
     Grant(
         "router",
-        publish=(f"{ROOT}/**",),
-        read=(f"{ROOT}/**",),
-        serve=(f"{ROOT}/**",),
-        query=(f"{ROOT}/**",),
-        tokens=(f"{ROOT}/**",),
+        publish=(keys.ALL,),
+        read=(keys.ALL,),
+        serve=(keys.ALL,),
+        query=(keys.ALL,),
+        tokens=(keys.ALL,),
     ),
 )
 
 
 def _adv(exprs: Iterable[str], tail: str) -> list[str]:
-    return [f"{k}/@adv/{tail}" for k in exprs]
+    return [keys.advanced(k, tail) for k in exprs]
 
 
 def _rules(g: Grant) -> list[tuple[str, tuple[str, ...], str, list[str]]]:
@@ -264,12 +263,12 @@ def acl_config(all_grants: Sequence[Grant], hub: str = "") -> dict[str, Any]:
     rules: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
     everyone = [g.user for g in all_grants]
-    tell = [f"{ROOT}/**", f"{ROOT}/**/@adv/**"]
+    tell = [keys.ALL, keys.advanced(keys.ALL, "**")]
     rules.append(_rule("all-declarations", _DECLARATIONS, "egress", tell))
     # An advanced subscriber's recovery query names its own key expression (`cbdi/**/
     # @adv/*/<zid>/<eid>/**`) and reaches the one publisher whose cache it asks; what
     # that publisher answers, the reader's own rules let through or not.
-    rules.append(_rule("all-recovery", ("query",), "egress", [f"{ROOT}/**/@adv/**"]))
+    rules.append(_rule("all-recovery", ("query",), "egress", [keys.advanced(keys.ALL, "**")]))
     policies.append(
         {"id": "all", "rules": ["all-declarations", "all-recovery"], "subjects": everyone}
     )

@@ -26,6 +26,7 @@ from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.lines import (
     Line,
+    Purpose,
     Search,
     extend,
     followed,
@@ -191,7 +192,7 @@ class ContinualPlanner(AgentTasks):
             # from the state it leaves and follows it (the executor lets it end).
             self.line = executing  # its running steps are in the task (`held`)
             task = self.task(req.goal)
-            self._from_committed("new", task, min_commit_steps=0)
+            self._from_committed(Purpose.NEW, task, min_commit_steps=0)
             search = self.search
             if search is not None:
                 if not reaches_goal(task, search.thread.state):
@@ -200,15 +201,17 @@ class ContinualPlanner(AgentTasks):
                 return [self._status(req.request_id, "searching")]
             self.line = None
         task = self.request_task(req.goal)
-        line = Line(self._plan_id(), "new", self.at_grid(self.now))
-        self.search = Search(self._thread(task, initial_state(task)), line, "new", req.request_id)
+        line = Line(self._plan_id(), Purpose.NEW, self.at_grid(self.now))
+        self.search = Search(
+            self._thread(task, initial_state(task)), line, Purpose.NEW, req.request_id
+        )
         return [self._status(req.request_id, "searching")]
 
     def _revise_from_committed(self, goal: list[list[str]]) -> list[Message]:
         """Search for the revised `goal` from the executing line's committed state;
         raise Unsolvable if the goal is out of reach from there, even relaxed."""
         task = self.task(goal)
-        out = self._from_committed("revise", task)
+        out = self._from_committed(Purpose.REVISE, task)
         search = self.search
         if search is not None and not reaches_goal(task, search.thread.state):
             self.search = None
@@ -248,7 +251,8 @@ class ContinualPlanner(AgentTasks):
         if line is None or req is None or not line.steps:
             return []
         if self.search is not None and (
-            self.search.purpose in ("repair", "revise") or self.search.repairs is not None
+            self.search.purpose in (Purpose.REPAIR, Purpose.REVISE)
+            or self.search.repairs is not None
         ):
             return []  # a repair, or a new plan following the running step, is on its way
         try:
@@ -276,7 +280,7 @@ class ContinualPlanner(AgentTasks):
         if fc.kind == FAILS_LATER and f"{failed}:{fc.reason}" != self.repair_trigger:
             self.repair_trigger = f"{failed}:{fc.reason}"
             self.log("forecast_failure", plan=line.plan_id, step=failed, reason=fc.reason)
-            out += self._from_committed("repair", task)
+            out += self._from_committed(Purpose.REPAIR, task)
         elif (
             fc.kind == HOLDS
             and self.improve
@@ -290,12 +294,12 @@ class ContinualPlanner(AgentTasks):
             # may itself be replaced before its committed part runs.
             line.improved = True
             rest = line.makespan_after(fc.commitment.count)
-            out += self._from_committed("improve", task, improve_on=rest)
+            out += self._from_committed(Purpose.IMPROVE, task, improve_on=rest)
         return out
 
     def _from_committed(
         self,
-        purpose: str,
+        purpose: Purpose,
         task: Task,
         improve_on: float = math.inf,
         min_commit_steps: int | None = None,
@@ -323,7 +327,7 @@ class ContinualPlanner(AgentTasks):
         origin = self.at_grid(max([self.now, *ends]))
         new = Line(self._plan_id(), purpose, origin, baseline=after, applies_after=after)
         thread: SearchThread | Improver
-        if purpose == "improve":
+        if purpose == Purpose.IMPROVE:
             thread = Improver(
                 task,
                 state,
@@ -391,7 +395,7 @@ class ContinualPlanner(AgentTasks):
                     isinstance(thread, SearchThread)
                     and thread.sent
                     and search.line is self.line
-                    and search.purpose == "new"
+                    and search.purpose == Purpose.NEW
                 ):
                     # Alg. 2 lines 11-14: the complete search starts over from the
                     # committed state, not after the greedy partial plans already out
@@ -430,7 +434,7 @@ class ContinualPlanner(AgentTasks):
         self.search, self.repair_trigger = None, ""
         self.last_forecast = ("", "", "")
         rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
-        if search.purpose == "new":
+        if search.purpose == Purpose.NEW:
             # A new plan must come: search again after what runs now.
             return rounds + self._again_from_committed(search, 0)
         return rounds
@@ -448,14 +452,14 @@ class ContinualPlanner(AgentTasks):
             task = self.task(request.goal)
         except (GoalError, PlannerError) as exc:
             return self._failed(search, str(exc))
-        self._from_committed("new", task, min_commit_steps=min_commit_steps, mode=mode)
+        self._from_committed(Purpose.NEW, task, min_commit_steps=min_commit_steps, mode=mode)
         if self.search is None:
             return self._failed(search, "the executing plan's committed part cannot be simulated")
         return []
 
     def _failed(self, search: Search, reason: str) -> list[Message]:
         self.search = None
-        if search.purpose in ("repair", "improve") and self.line is not None:
+        if search.purpose in (Purpose.REPAIR, Purpose.IMPROVE) and self.line is not None:
             self.log("repair_failed", plan=search.line.plan_id, reason=reason)
             return []  # the executing plan goes on; execution reports if it fails
         goal = self.request.goal if self.request is not None else []
@@ -463,7 +467,7 @@ class ContinualPlanner(AgentTasks):
 
     def _publish(self, search: Search, plan: Plan, complete: bool) -> PartialPlan:
         line = search.line
-        if (search.purpose != "new" or search.repairs is not None) and not line.steps:
+        if (search.purpose != Purpose.NEW or search.repairs is not None) and not line.steps:
             if self.line is not None and self.line is not line:
                 self.previous = [*self.previous, self.line][-PREVIOUS:]
             self.line = line  # the new line takes over from the committed point

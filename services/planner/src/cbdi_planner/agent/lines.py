@@ -4,7 +4,8 @@ A *line* is one plan as the executor sees it (one plan id): its partial plans co
 it (baseline: the plan id). A repair, a revised goal or an improvement starts a new line
 from the committed state (baseline and `applies_after`: the last committed step), which
 the scheduler swaps in with an early arrest. A *search* is a search thread and the line
-it fills (`ContinualPlanner` in `cbdi_planner.agent.continual` keeps both).
+it fills (`ContinualPlanner` in `cbdi_planner.agent.continual` keeps both), searched
+for a `Purpose`.
 
 A new line follows steps of the lines before it, which may still run while its own
 wait (a robot mid-drive); so may the line after it, before either starts. The planner
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 from msgspec.structs import replace
 
@@ -31,6 +33,7 @@ from cbdi_planner.task import Task
 
 __all__ = [
     "Line",
+    "Purpose",
     "Search",
     "extend",
     "failure_status",
@@ -44,12 +47,24 @@ __all__ = [
 ]
 
 
+class Purpose(StrEnum):
+    """Why a search runs. The value is the word of the wire and the logs
+    (`PartialPlan.purpose`, `SearchRound.purpose`), which recordings and the monitor's
+    counts by purpose keep: never rename one.
+    """
+
+    NEW = "new"  # a plan for a request, from scratch or after a running step
+    REPAIR = "repair"  # the executing plan is forecast to fail: another after its committed part
+    REVISE = "revise"  # the goal grew: a plan for the union, after the committed part
+    IMPROVE = "improve"  # the executing plan holds: a shorter one after its committed part
+
+
 @dataclass
 class Line:
     """One plan id's published steps (absolute simulated times) and their statuses."""
 
     plan_id: str
-    purpose: str
+    purpose: Purpose
     origin: float
     baseline: str = ""
     applies_after: str = ""
@@ -78,7 +93,7 @@ class Search:
 
     thread: SearchThread | Improver
     line: Line
-    purpose: str
+    purpose: Purpose
     request_id: str
     repairs: Line | None = None  # the executing line this search continues from
     blocked: bool | None = None  # a failed search: blocked by something that moves?
@@ -156,7 +171,7 @@ def extend(
         complete=complete,
         applies_after=line.applies_after if first == 0 else "",
         request_id=search.request_id,
-        purpose=search.purpose,
+        purpose=search.purpose.value,
     )
 
 
@@ -166,7 +181,7 @@ def round_report(agent: str, search: Search, r: RoundDone, now: float) -> Search
         agent=agent,
         request_id=search.request_id,
         plan_id=search.line.plan_id,
-        purpose=search.purpose,
+        purpose=search.purpose.value,
         number=r.number,
         kind=r.kind,
         mode=r.mode,

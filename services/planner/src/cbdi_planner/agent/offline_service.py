@@ -32,7 +32,7 @@ from cbdi.wire.planner import SearchRequest, SearchStatus
 from cbdi_planner.agent.backends import COUNTING_BACKENDS, Counted, plan_counted, plan_with
 from cbdi_planner.agent.epochs import NO_COUNTING, Epochs, checked, waits
 from cbdi_planner.agent.errors import BadRequestError
-from cbdi_planner.agent.lines import plan_prefix
+from cbdi_planner.agent.lines import Purpose, plan_prefix
 from cbdi_planner.agent.offline import Basis, Committed, Execution
 from cbdi_planner.agent.pacing import Pacer
 from cbdi_planner.agent.problem import (
@@ -268,7 +268,7 @@ class OfflinePlannerService(Epochs):
             steps=steps,
             complete=True,
             request_id=req.request_id,
-            purpose="revise" if req.kind == "revise" else "new",
+            purpose=(Purpose.REVISE if req.kind == "revise" else Purpose.NEW).value,
         )
         self.ctx.log.info(
             "plan",

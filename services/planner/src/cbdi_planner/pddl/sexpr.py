@@ -41,11 +41,14 @@ class SList:
 
 SNode = Sym | SList
 
+# A list being read: the nodes read so far in it, and where its '(' is.
+_Open = tuple[list[SNode], int, int]
+
 
 def read_sexpr(text: str, file: str = "<string>") -> SList:
     """Read exactly one top-level list from `text`; reject unbalanced or trailing input,
     and lists nested deeper than MAX_DEPTH."""
-    stack: list[tuple[list[SNode], int, int]] = []
+    stack: list[_Open] = []
     result: SList | None = None
     line, line_start = 1, 0
     for match in _TOKEN.finditer(text):
@@ -65,44 +68,57 @@ def read_sexpr(text: str, file: str = "<string>") -> SList:
                 column=column,
                 expected="end of file",
             )
-        if token == "(":
-            if len(stack) >= MAX_DEPTH:
-                raise PddlSyntaxError(
-                    f"lists nested more than {MAX_DEPTH} deep",
-                    file=file,
-                    line=line,
-                    column=column,
-                    expected="a shallower expression",
-                )
-            stack.append(([], line, column))
-        elif token == ")":
-            if not stack:
-                raise PddlSyntaxError(
-                    "unbalanced ')'", file=file, line=line, column=column, expected="'('"
-                )
-            items, open_line, open_column = stack.pop()
-            node = SList(tuple(items), open_line, open_column, line, column)
-            if stack:
-                stack[-1][0].append(node)
-            else:
-                result = node
-        elif not stack:
+        result = _take(token, stack, file, line, column)
+    return _finish(result, stack, file, line, len(text) - line_start + 1)
+
+
+def _take(token: str, stack: list[_Open], file: str, line: int, column: int) -> SList | None:
+    """Add `token` to the lists open on `stack`; return the top-level list it closes, if one."""
+    if token == "(":
+        if len(stack) >= MAX_DEPTH:
             raise PddlSyntaxError(
-                f"unexpected {token!r} outside any list",
+                f"lists nested more than {MAX_DEPTH} deep",
                 file=file,
                 line=line,
                 column=column,
-                expected="'('",
+                expected="a shallower expression",
             )
-        else:
-            stack[-1][0].append(Sym(token.lower(), line, column))
+        stack.append(([], line, column))
+    elif token == ")":
+        if not stack:
+            raise PddlSyntaxError(
+                "unbalanced ')'", file=file, line=line, column=column, expected="'('"
+            )
+        items, open_line, open_column = stack.pop()
+        node = SList(tuple(items), open_line, open_column, line, column)
+        if not stack:
+            return node
+        stack[-1][0].append(node)
+    elif not stack:
+        raise PddlSyntaxError(
+            f"unexpected {token!r} outside any list",
+            file=file,
+            line=line,
+            column=column,
+            expected="'('",
+        )
+    else:
+        stack[-1][0].append(Sym(token.lower(), line, column))
+    return None
+
+
+def _finish(result: SList | None, stack: list[_Open], file: str, line: int, column: int) -> SList:
+    """Return the definition read; refuse a list left open or a text with none.
+
+    `line` and `column` are those of the end of the text.
+    """
     if stack:
         _, open_line, open_column = stack[-1]
         raise PddlSyntaxError(
             f"the '(' at line {open_line}, column {open_column} is never closed",
             file=file,
             line=line,
-            column=len(text) - line_start + 1,
+            column=column,
             expected="')'",
         )
     if result is None:
