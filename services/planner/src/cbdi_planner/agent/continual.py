@@ -19,22 +19,20 @@ from msgspec.structs import replace
 
 from cbdi.agentfile import PlanningSettings
 from cbdi.beliefs import BeliefSet
-from cbdi.wire.agent import ActionStatus, PartialPlan
+from cbdi.wire.agent import PartialPlan
 from cbdi.wire.base import Message
 from cbdi.wire.planner import SearchRequest, SearchRound, SearchStatus
-from cbdi_planner.agent.errors import BadRequestError, UnknownPlanError
+from cbdi_planner.agent.errors import BadRequestError
+from cbdi_planner.agent.following import PREVIOUS, Following
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.lines import (
     Line,
     Purpose,
     Search,
     extend,
-    followed,
     forecast_report,
-    held,
     plan_prefix,
     round_report,
-    running_line,
     search_status,
 )
 from cbdi_planner.agent.problem import (
@@ -70,10 +68,9 @@ from cbdi_planner.task import Task
 __all__ = ["ContinualPlanner"]
 
 Log = Callable[..., None]
-PREVIOUS = 8  # lines kept that the executing one follows (see `ContinualPlanner.previous`)
 
 
-class ContinualPlanner(AgentTasks):
+class ContinualPlanner(AgentTasks, Following):
     """The continual planner of one agent."""
 
     def __init__(
@@ -99,9 +96,7 @@ class ContinualPlanner(AgentTasks):
         self.now = 0.0
         self.request: SearchRequest | None = None
         self.line: Line | None = None
-        # The lines `line` took over from (latest last): the steps it follows may still
-        # run there, and a new plan follows them too.
-        self.previous: list[Line] = []
+        self.previous: list[Line] = []  # see `Following`
         self._search: Search | None = None
         self.last_forecast: tuple[str, str, str] = ("", "", "")
         self.repair_trigger = ""
@@ -121,18 +116,6 @@ class ContinualPlanner(AgentTasks):
         if old is not None and old is not new and isinstance(old.thread, Improver):
             old.thread.close()  # its worker thread stops
         self._search = new
-
-    def held(self) -> list[tuple[str, ...]]:
-        """The facts the running steps started from (`lines.held`)."""
-        return held(self.domain, [self.line, *self.previous])
-
-    def followed(self, task: Task, line: Line) -> State | None:
-        """The state the running steps `line` follows leave (`lines.followed`)."""
-        return followed(task, line, self.previous, self.now)
-
-    def running_line(self) -> Line | None:
-        """The line whose step runs now: the executing one, or one it follows."""
-        return running_line([self.line, *reversed(self.previous)])
 
     # -- inputs ---------------------------------------------------------------------------
     def on_request(self, req: SearchRequest) -> list[Message]:
@@ -156,11 +139,6 @@ class ContinualPlanner(AgentTasks):
             return [self._failure(req.request_id, str(exc), goal)]
         except (GoalError, PlannerError) as exc:
             raise BadRequestError(req.request_id, str(exc)) from exc
-
-    @staticmethod
-    def search_follows_nothing(line: Line) -> bool:
-        """Whether no step of `line` runs (a new search need not follow it)."""
-        return not line.running()
 
     def _on_request(self, req: SearchRequest) -> list[Message]:
         if req.kind == "cancel":
@@ -217,31 +195,6 @@ class ContinualPlanner(AgentTasks):
             self.search = None
             raise Unsolvable("no action reaches the goal from these beliefs (relaxed)")
         return out
-
-    def on_status(self, status: ActionStatus) -> None:
-        """Record a step's status for the commitment and the forecast.
-
-        Raise UnknownPlanError for a plan this planner never published (statuses of
-        replaced plans are expected and ignored).
-        """
-        if status.plan_id not in self.published:
-            if (
-                self.plan_prefix != plan_prefix(self.agent, 0)
-                and status.plan_id.startswith(plan_prefix(self.agent, 0))
-                and not status.plan_id.startswith(self.plan_prefix)
-            ):
-                return  # a predecessor's plan, still being reported on: not ours to track
-            raise UnknownPlanError(status.plan_id, status.step_id)
-        for line in (self.line, *self.previous, self.search.repairs if self.search else None):
-            if (
-                line is not None
-                and status.plan_id == line.plan_id
-                and status.step_id in line.step_ids
-            ):
-                k = line.step_ids.index(status.step_id)
-                line.statuses[k] = status.status
-                if status.status == "running":
-                    line.began[k] = status.time  # the world's start time
 
     def on_beliefs(self, beliefs: BeliefSet, now: float) -> list[Message]:
         """New beliefs: forecast the executing plan's failure and act on it."""
