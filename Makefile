@@ -67,8 +67,8 @@ test-fast: venv
 	$(BIN)/python -m pytest $(PYTEST_PARALLEL) -m "not e2e" $(PYTEST_ARGS)
 
 lint: venv
-	$(BIN)/ruff check shared services domains tests benchmarks docs/tutorial
-	$(BIN)/mypy --strict shared/src/cbdi docs/tutorial/robot.py
+	$(BIN)/ruff check shared services domains tests benchmarks docs/tutorial docs/robot-body
+	$(BIN)/mypy --strict shared/src/cbdi docs/tutorial/robot.py docs/robot-body/body.py
 	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src domains/courier/src
 
 bench: venv

@@ -20,7 +20,7 @@ from cbdi_recycling.maps import load_map
 
 from cbdi.errors import CbdiError
 from cbdi.launcher.scenario import load_scenario
-from cbdi.launcher.services import world_args
+from cbdi.launcher.services import plan_services, world_args
 from cbdi_scheduler.agentfile import load_agent
 
 REPO = Path(__file__).resolve().parents[2]
@@ -249,3 +249,24 @@ def test_cbdi_up_exits_2_for_a_search_core_that_does_not_exist() -> None:
     )
     assert done.returncode == 2, done.stderr
     assert "robot1/planner" in done.stderr and "CBDI_SEARCH_CORE='bogus'" in done.stderr
+
+
+def test_a_scenario_gives_an_agent_s_actions_to_its_body(tmp_path: Path) -> None:
+    """`performers` in a scenario's agent entry: added to the agent file's, for this run
+    (the executor sends those steps to the robot's process, which in lockstep is a
+    member); anything but a list of action names is refused, naming the field."""
+    path = tmp_path / "s.toml"
+    head = f'name = "s"\nmap = "{MAP}"\n[run]\nsimulator = "recycling"\nlockstep = true\n'
+    entry = f'[[agents]]\nname = "robot1"\nkind = "bdi"\nagent_file = "{AGENT}"\n'
+    path.write_text(head + entry + 'performers = ["MOVE"]\n')
+    scenario = load_scenario(path)
+    assert scenario.agents[0].performers == ("move",)
+    args = world_args(scenario)
+    assert "robot1/performer" in [args[i + 1] for i, a in enumerate(args) if a == "--member"]
+    plans = plan_services(scenario, "tcp/127.0.0.1:7447")
+    executor = next(p for p in plans if p.service == "robot1/executor")
+    assert "--performer" in executor.args and "move" in executor.args
+    for bad, why in (('"move"', "list of action names"), ('["move it"]', "performers[0]")):
+        path.write_text(head + entry + f"performers = {bad}\n")
+        with pytest.raises(CbdiError, match=rf"agents\[0\]\.performers.*|{why}"):
+            load_scenario(path)

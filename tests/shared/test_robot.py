@@ -141,13 +141,31 @@ async def test_a_sim_sleep_ends_at_the_first_time_at_or_past_its_end() -> None:
         woke.append(name)
 
     tasks = [asyncio.create_task(nap(n, s)) for n, s in (("b", 2.0), ("a", 1.5), ("c", 0.0))]
-    await asyncio.sleep(0)
-    assert len(clock.parked) == 3
+    for _ in range(3):
+        await asyncio.sleep(0)
+    assert len(clock.parked) == 2 and woke == ["c"]  # a sleep of 0 waits for no tick
     clock.advance(1.0)
     await asyncio.sleep(0)
     assert woke == ["c"]
     clock.advance(2.0)  # both due: in the order they end
     await asyncio.gather(*tasks)
     assert woke == ["c", "a", "b"] and not clock.parked
+    # A loop of short sleeps catches up with the run's time at once, then waits.
+    steps: list[float] = []
+
+    async def control() -> None:
+        for _ in range(30):
+            await clock.sleep(0.1)
+            steps.append(clock.now)
+
+    loop = asyncio.create_task(control())
+    for _ in range(5):
+        await asyncio.sleep(0)
+    assert steps == [] and loop in clock.parked  # 2.1 is past the run's time (2.0)
+    clock.advance(3.0)
+    for _ in range(15):
+        await asyncio.sleep(0)
+    assert len(steps) == 10 and loop in clock.parked  # 2.1 .. 3.0, then 3.1 waits
+    loop.cancel()
     with pytest.raises(ValueError, match="nan"):
         await clock.sleep(float("nan"))

@@ -39,6 +39,7 @@ __all__ = [
     "AgentEntry",
     "RunSettings",
     "Scenario",
+    "agent_performers",
     "check_performed",
     "check_ranges",
     "check_until",
@@ -63,6 +64,9 @@ class AgentEntry:
     kind: str = "scripted"
     detection_depth: int | None = None
     agent_file: Path | None = None  # a BDI agent's file (planner, scheduler)
+    # Actions of this run's agent that its own process performs (`cbdi.robot`), besides
+    # those its agent file names: the same agent, driven by its body in this scenario.
+    performers: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -247,13 +251,17 @@ def _asks(data: dict[str, Any]) -> bool:
     )
 
 
+def agent_performers(agent: AgentEntry) -> tuple[str, ...]:
+    """The actions `agent` leaves to performers: its agent file's and the scenario's."""
+    if agent.kind != "bdi" or agent.agent_file is None:
+        return ()
+    named = read_agent_file(agent.agent_file, agent.name).performers
+    return tuple(dict.fromkeys([*named, *agent.performers]))
+
+
 def performer_actions(scenario: Scenario) -> list[str]:
     """The actions the scenario's BDI agents leave to performers (`cbdi.performer`)."""
-    found: set[str] = set()
-    for agent in scenario.agents:
-        if agent.kind == "bdi" and agent.agent_file is not None:
-            found.update(read_agent_file(agent.agent_file, agent.name).performers)
-    return sorted(found)
+    return sorted({a for agent in scenario.agents for a in agent_performers(agent)})
 
 
 def check_performed(scenario: Scenario) -> None:
@@ -275,6 +283,7 @@ def check_performed(scenario: Scenario) -> None:
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(str(raw.domain), "file", f"cannot read it ({exc})") from None
         performed = {a.lower() for a in world_actions} | set(raw.performers)
+        performed |= set(agent.performers)
         for action, line in sorted(declared.items(), key=lambda kv: kv[1]):
             if action not in performed:
                 world = ", ".join(world_actions) or "nothing"
@@ -321,7 +330,21 @@ def _agent(raw: Any, index: int, where: str, base: Path) -> AgentEntry:
         agent_file = (base / rel).resolve()
         if not agent_file.is_file():
             raise ConfigError(where, f"{field}.agent_file", f"no such file {agent_file}")
-    return AgentEntry(name=name, kind=kind, detection_depth=depth, agent_file=agent_file)
+    performers = raw.get("performers", [])
+    if not isinstance(performers, list) or (kind != "bdi" and performers):
+        raise ConfigError(where, f"{field}.performers", "a bdi agent's list of action names")
+    for i, action in enumerate(performers):
+        try:
+            keys.validate_name(action if isinstance(action, str) else "", "action")
+        except ValueError as exc:
+            raise ConfigError(where, f"{field}.performers[{i}]", str(exc)) from None
+    return AgentEntry(
+        name=name,
+        kind=kind,
+        detection_depth=depth,
+        agent_file=agent_file,
+        performers=tuple(a.lower() for a in performers),
+    )
 
 
 def _run(raw: Any, where: str) -> RunSettings:

@@ -14,7 +14,7 @@ from pathlib import Path
 from cbdi import keys
 from cbdi.agentfile import read_agent_file
 from cbdi.errors import CbdiError
-from cbdi.launcher.scenario import AGENT_KINDS, AgentEntry, Scenario
+from cbdi.launcher.scenario import AGENT_KINDS, AgentEntry, Scenario, agent_performers
 from cbdi.robot import MEMBER as ROBOT_MEMBER
 
 __all__ = ["ServicePlan", "agent_of", "plan_services"]
@@ -84,8 +84,7 @@ def world_args(scenario: Scenario, path_of: PathOf = str) -> tuple[str, ...]:
             args += ["--member", keys.member(agent.name, component)]
         # The robot's own process (cbdi.robot) performs some of its actions: in lockstep
         # it is a member too, started by the user, waited for from epoch -1.
-        file = agent.agent_file
-        if run.lockstep and file is not None and read_agent_file(file, agent.name).performers:
+        if run.lockstep and agent_performers(agent):
             args += ["--member", keys.member(agent.name, ROBOT_MEMBER)]
     return tuple(args)
 
@@ -112,7 +111,7 @@ def _agent_plan(
         if component == "executor":
             assert agent.agent_file is not None
             raw = read_agent_file(agent.agent_file, agent.name)
-            for action in raw.performers:
+            for action in agent_performers(agent):
                 args += ["--performer", action]
             args += raw.execution.executor_args()
         return ServicePlan(service, *_BDI_SCRIPTS[component], tuple(args))

@@ -1,0 +1,59 @@
+"""The robot-body example (docs/robot-body): three recycling robots on the paper's map,
+each driven by its own process (a pymunk body under velocity control that performs
+`move` and senses its place), the world simulating the rest. In lockstep the run ends
+done, every robot recycles something, and each robot's moves were its body's."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests_support import BIN, REPO, Proc, free_port
+
+pytestmark = pytest.mark.e2e
+
+EXAMPLE = REPO / "docs/robot-body"
+
+
+def test_three_bodies_drive_their_robots_in_lockstep(tmp_path: Path) -> None:
+    port = free_port()
+    router = f"tcp/127.0.0.1:{port}"
+    bodies = [
+        Proc(
+            [sys.executable, str(EXAMPLE / "body.py"), f"robot{n}", router, "--seed", str(n)],
+            tmp_path / f"body{n}.log",
+        )
+        for n in (1, 2, 3)
+    ]
+    try:
+        up = subprocess.run(
+            [
+                *(str(BIN / "cbdi"), "up", str(EXAMPLE / "scenario.toml"), "--port", str(port)),
+                *("--lockstep", "--speed", "0", "--json"),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=600,
+            cwd=REPO,
+            stdin=subprocess.DEVNULL,
+        )
+        said = [b.output() for b in bodies]
+    finally:
+        for b in bodies:
+            b.stop()
+    assert up.returncode == 0, up.stderr[-3000:]
+    summary = json.loads(up.stdout)
+    assert summary["result"] == "done" and not summary["stalls"], summary
+    performed = summary["performed"]
+    for n, log in zip((1, 2, 3), said, strict=True):
+        robot = f"robot{n}"
+        assert f"{robot}: the body starts at c_" in log and "lockstep_member" in log, log[-2000:]
+        assert performed[robot].get("move", 0) > 0, performed
+        assert performed[robot].get("recycle", 0) >= 1, performed  # every robot takes part
+    # The bodies' moves are the world's moves: the world was asked by each body.
+    counts = summary["stats"]["agents"]
+    assert all(counts[a]["moves"] == performed[a]["move"] for a in counts), counts
