@@ -316,3 +316,22 @@ def test_a_search_follows_a_step_of_the_plan_the_executing_one_replaced() -> Non
     plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
     assert plans[0].applies_after == f"{first.plan_id}-1"
     assert plans[0].steps[0].args[:2] == ["robot1", "c_2_0"]
+
+
+def test_a_step_of_another_plan_taken_up_ends_the_running_one() -> None:
+    """An executor killed mid-move never reports the move's end; its successor takes up
+    the next plan's step (or refuses it): the move is over, and a search after that no
+    longer follows it (a killed executor's stale move made every later plan start where
+    that move would have left the robot, and every one was refused)."""
+    core = planner()
+    first = run_first_steps(core, 1)  # moving c_1_0 -> c_2_0, then the executor is killed
+    core.on_request(request("revise", ("p2",)))
+    revised = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert core.running_line() is not None  # the move still runs, as far as we know
+    for what in ("refused", "running"):
+        core.on_status(status(revised[0].plan_id, revised[0].steps[0].step_id, what))
+        assert core.running_line() is (core.line if what == "running" else None)
+        assert all(st != "running" for p in core.previous for st in p.statuses.values())
+    core.on_request(replace(request(goal=("p2",)), request_id="s2"))
+    plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
+    assert plans and plans[0].applies_after != f"{first.plan_id}-1"

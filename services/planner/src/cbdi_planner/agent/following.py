@@ -17,6 +17,8 @@ from cbdi_planner.task import Task
 __all__ = ["PREVIOUS", "Following"]
 
 PREVIOUS = 8  # lines kept that the executing one follows (`Following.previous`)
+DISPATCHED = ("running", "succeeded", "failed", "refused")  # the executor took it up
+ENDED = "succeeded"  # a step known to have ended (its effects, if any, in the beliefs)
 
 
 class Following:
@@ -65,13 +67,18 @@ class Following:
                 return  # a predecessor's plan, still being reported on: not ours to track
             raise UnknownPlanError(status.plan_id, status.step_id)
         repairs = self._search.repairs if self._search else None
-        for line in (self.line, *self.previous, repairs):
-            if (
-                line is not None
-                and status.plan_id == line.plan_id
-                and status.step_id in line.step_ids
-            ):
+        lines = [line for line in (self.line, *self.previous, repairs) if line is not None]
+        for line in lines:
+            if status.plan_id == line.plan_id and status.step_id in line.step_ids:
                 k = line.step_ids.index(status.step_id)
                 line.statuses[k] = status.status
                 if status.status == "running":
                     line.began[k] = status.time  # the world's start time
+        if status.status in DISPATCHED:
+            # The executor dispatched a step of this plan (or refused it when due): what
+            # other plans ran before it has ended, whatever its last status said (an
+            # executor killed mid-step never reports that step's end).
+            for line in lines:
+                if line.plan_id != status.plan_id:
+                    ended = {k: ENDED for k, st in line.statuses.items() if st == "running"}
+                    line.statuses.update(ended)
