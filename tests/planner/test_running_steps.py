@@ -13,9 +13,12 @@ import itertools
 
 import pytest
 
+from cbdi.agentfile import PlanningSettings
 from cbdi.beliefs import BeliefSet, fact, fluent, instance
 from cbdi.wire.agent import ActionStatus, PlanStep
+from cbdi_planner.agent.continual import ContinualPlanner
 from cbdi_planner.agent.grounded import Groundings, reaches_goal
+from cbdi_planner.agent.lines import Line, Purpose
 from cbdi_planner.agent.offline import Execution
 from cbdi_planner.agent.steps import held_at_start
 from cbdi_planner.continual import Sensed, commit
@@ -111,3 +114,18 @@ def test_the_offline_planner_plans_from_where_a_busy_robot_s_drive_leaves_it() -
     assert {k.args: v for k, v in c.problem.init_numeric.items() if k.name == "battery"} == {
         ("robot1",): 19.0
     }
+
+
+def test_the_online_planner_grounds_a_busy_robot_s_task_with_its_running_drive() -> None:
+    """The continual planner's task reaches the drive its executing line runs, though
+    the beliefs (busy, not idle) would give no action at all."""
+    core = ContinualPlanner("robot1", DOMAIN, PlanningSettings(), improve=False)
+    core.on_beliefs(floor(19.0, busy=True), 1.0)
+    with pytest.raises(Unsolvable):  # nothing runs, as far as the planner knows
+        core.task(GOAL)
+    core.line = Line(
+        "p", Purpose.NEW, 0.0, steps=[ScheduledAction(0.0, DRIVE, 2.0)], step_ids=["p-1"]
+    )
+    core.line.statuses[0], core.line.began[0] = "running", 0.0
+    task = core.task(GOAL)
+    assert DRIVE in {a.name for a in task.actions}

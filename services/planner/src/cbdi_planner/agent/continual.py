@@ -70,7 +70,7 @@ __all__ = ["ContinualPlanner"]
 Log = Callable[..., None]
 
 
-class ContinualPlanner(AgentTasks, Following):
+class ContinualPlanner(Following, AgentTasks):
     """The continual planner of one agent."""
 
     def __init__(
