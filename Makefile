@@ -47,7 +47,7 @@ system-tools:
 
 # The paper's 7x7 scenario: one BDI robot (planner, scheduler and executor processes),
 # then three sharing the world; the grid every epoch with what each robot intends. The
-# second run is recorded to MCAP and inspected (see the README for replay and rerun).
+# second run is recorded to MCAP and inspected (docs/usage.md: replay and rerun).
 demo: venv
 	$(BIN)/cbdi up paper-7x7 --view text --quiet
 	$(BIN)/cbdi up paper-7x7 --agents 3 --view text --quiet --record runs/demo.mcap
