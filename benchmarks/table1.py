@@ -4,7 +4,8 @@ Every situation of Table I (people step every 4 or 8 epochs, detection depth 1 t
 or 3 litter items known at the start) runs in both modes for seeds 1..N at each planning
 speed factor (x the agent file's `[planning] planning_speed`), `--jobs` `cbdi up --json`
 processes at a time, each with a router port of its own. Then one real-time run per
-situation and mode (`--speed 1 --no-lockstep`), beside the lockstep ones.
+situation and mode (`--speed 1 --no-lockstep`; `--realtime-seeds N`: seeds 1..N), beside
+the lockstep ones.
 
 Beside the runs: the static optimum (all litter known, no people) and, per seed, the
 best plan a clairvoyant planner finds (people's walk as timed initial literals).
@@ -100,9 +101,14 @@ def bounds_path(csv: Path) -> Path:
 
 
 def tasks_of(
-    situations: Sequence[Situation], seeds: int, factors: Sequence[float], realtime: bool
+    situations: Sequence[Situation],
+    seeds: int,
+    factors: Sequence[float],
+    realtime: bool,
+    realtime_seeds: int = 1,
 ) -> list[Task]:
-    """Return every lockstep task, then the real-time ones (factor 1, one seed)."""
+    """Return every lockstep task, then the real-time ones (factor 1, seeds 1..
+    `realtime_seeds`)."""
     tasks = [
         Task(s, mode, seed, factor)
         for factor in factors
@@ -112,7 +118,10 @@ def tasks_of(
     ]
     if realtime:
         tasks += [
-            Task(s, mode, REALTIME_SEED, 1.0, "realtime") for s in situations for mode in MODES
+            Task(s, mode, seed, 1.0, "realtime")
+            for s in situations
+            for mode in MODES
+            for seed in range(REALTIME_SEED, REALTIME_SEED + realtime_seeds)
         ]
     return sorted(tasks, key=lambda t: t.sort_key())
 
@@ -181,7 +190,9 @@ def benchmark(
 ) -> int:
     """Run every task and the bounds, write the CSVs, render; `runner` replaces cbdi up."""
     situations = args.only or SITUATIONS
-    tasks = tasks_of(situations, args.seeds, args.planning_speeds, args.realtime)
+    tasks = tasks_of(
+        situations, args.seeds, args.planning_speeds, args.realtime, args.realtime_seeds
+    )
     if runner is None or bound_maker is None:
         try:
             runner, bound_maker = _real(args)
@@ -315,6 +326,12 @@ def _parser() -> argparse.ArgumentParser:
         action=argparse.BooleanOptionalAction,
         default=True,
         help="also one real-time run per situation and mode (default on)",
+    )
+    p.add_argument(
+        "--realtime-seeds",
+        type=_positive_int,
+        default=1,
+        help="real-time runs per situation and mode, seeds 1..N (default 1)",
     )
     p.add_argument(
         "--clairvoyant",

@@ -227,6 +227,19 @@ def realtime_table(runs: Sequence[Run]) -> list[str]:
                     "n/a" if twin is None or twin.moves is None else str(twin.moves),
                 ]
             body.append(cells)
+    fewer = 0
+    for situation in SITUATIONS:
+        means = [
+            _mean([r.moves for r in real if r.task.situation == situation and r.task.mode == m])
+            for m in ("offline", "online")
+        ]
+        fewer += means[0] is not None and means[1] is not None and means[1] < means[0]
+    count = len({r.task.situation for r in real})
+    said = [
+        f"Online fewer moves than offline in real time (the mean of its runs): {fewer} of "
+        f"{count} situations.",
+        "",
+    ]
     head = [
         "situation",
         "seed",
@@ -235,7 +248,13 @@ def realtime_table(runs: Sequence[Run]) -> list[str]:
         "online real time: moves, sim s (result)",
         "online lockstep moves",
     ]
-    return _table(head, body)
+    return said + _table(head, body)
+
+
+def _mean(values: Sequence[int | None]) -> float | None:
+    """The mean of the runs that ended with a count (None if none did)."""
+    done = [v for v in values if v is not None]
+    return sum(done) / len(done) if done else None
 
 
 def _run_cell(run: Run | None) -> str:

@@ -183,6 +183,14 @@ def test_the_real_time_table_stands_beside_the_lockstep_runs() -> None:
     text = report.render_markdown([fake_run(t) for t in tasks], [])
     line = next(x for x in text.splitlines() if x.startswith("| 4,1,2 | 1 |"))
     assert line.endswith("| 52, 81.0 (done) | 52 | 44, 93.5 (done) | 44 |")
+    # Several real-time seeds per situation, and how many situations online wins.
+    tasks = table1.tasks_of((S412, S813), 1, (1.0,), realtime=True, realtime_seeds=3)
+    real = [t for t in tasks if t.clock == "realtime"]
+    assert sorted({t.seed for t in real}) == [1, 2, 3] and len(real) == 12
+    text = report.render_markdown([fake_run(t) for t in tasks], [])
+    assert "Online fewer moves than offline in real time (the mean of its runs): " in text
+    for seed in (2, 3):
+        assert any(x.startswith(f"| 8,1,3 | {seed} | ") for x in text.splitlines()), text
 
 
 # ---------------------------------------------------------------- CSV and outputs
