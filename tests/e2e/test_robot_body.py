@@ -1,7 +1,10 @@
 """The robot-body example (docs/robot-body): three recycling robots on the paper's map,
 each driven by its own process (a pymunk body under velocity control that performs
 `move` and senses its place), the world simulating the rest. In lockstep the run ends
-done, every robot recycles something, and each robot's moves were its body's."""
+done with every item recycled, and each robot's moves were its body's. (Not asserted:
+which robot recycles what, nor that two such runs are the same: the body asks the world
+from within a call, and the world may serve that request in the next epoch, see
+docs/your-own-domain.md.)"""
 
 from __future__ import annotations
 
@@ -48,12 +51,14 @@ def test_three_bodies_drive_their_robots_in_lockstep(tmp_path: Path) -> None:
     assert up.returncode == 0, up.stderr[-3000:]
     summary = json.loads(up.stdout)
     assert summary["result"] == "done" and not summary["stalls"], summary
+    assert sum(a["recycled"] for a in summary["stats"]["agents"].values()) == 3, summary
     performed = summary["performed"]
     for n, log in zip((1, 2, 3), said, strict=True):
         robot = f"robot{n}"
         assert f"{robot}: the body starts at c_" in log and "lockstep_member" in log, log[-2000:]
         assert performed[robot].get("move", 0) > 0, performed
-        assert performed[robot].get("recycle", 0) >= 1, performed  # every robot takes part
-    # The bodies' moves are the world's moves: the world was asked by each body.
+    # The bodies asked the world to move them too: it moved each (a move a person
+    # blocked is counted there as blocked, not as a move).
     counts = summary["stats"]["agents"]
-    assert all(counts[a]["moves"] == performed[a]["move"] for a in counts), counts
+    for a in counts:
+        assert 0 < counts[a]["moves"] <= performed[a]["move"], counts
