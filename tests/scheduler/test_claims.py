@@ -245,3 +245,119 @@ def test_a_robot_releases_a_goal_it_achieved_and_others_believe_it() -> None:
     again = r2.on_percepts(seen("robot2", 2, ("p1", (1, 1))))
     assert again.claims == [] and "recycle" not in r2.desires
     assert [e for e in again.events if e.desire == "recycle"] == []  # not even added
+
+
+# -- claims that follow the work: bids, an owner's answer, handovers ---------------------
+def shared_out(*views: Claims, claims: list[Claim]) -> None:
+    for claim in claims:
+        for view in views:
+            view.on_claim(claim)
+
+
+def test_a_later_robot_bids_only_when_clearly_sooner_and_again_only_when_nearer_still() -> None:
+    a = Claims("robot1", "recyclers", frozenset({"recycled"}))
+    b = Claims("robot2", "recyclers", frozenset({"recycled"}))
+    shared_out(a, b, claims=a.claim([("recycled", "p1")], 0, lambda item: 10.0))
+    assert b.owner("p1") == "robot1"
+    assert b.bid(("recycled", "p1"), 5, lambda item: 0.0) == []  # the first claims' time
+    # 8 is not clearly below 10 (by 3 at least): no bid, and the owner stays.
+    assert b.bid(("recycled", "p1"), 20, lambda item: 8.0) == []
+    bid = b.bid(("recycled", "p1"), 21, lambda item: 6.0)
+    assert [(c.agent, c.item, c.epoch, c.cost, c.released) for c in bid] == [
+        ("robot2", "p1", 21, 6.0, False)
+    ]
+    assert b.owner("p1") == "robot1"  # a bid alone moves nothing: the owner decides
+    assert b.bid(("recycled", "p1"), 22, lambda item: 4.0) == []  # not 3 below its bid
+    assert [c.cost for c in b.bid(("recycled", "p1"), 23, lambda item: 2.5)] == [2.5]
+    assert b.bid(("recycled", "p2"), 24, lambda item: 0.0) == []  # nobody owns p2
+    assert a.bid(("recycled", "p1"), 24, lambda item: 0.0) == []  # ours already
+
+
+def test_the_owner_hands_an_item_over_to_a_clearly_sooner_bidder_and_everyone_agrees() -> None:
+    views = [Claims(f"robot{i}", "recyclers", frozenset({"recycled"})) for i in (1, 2, 3)]
+    a, b, c = views
+    shared_out(*views, claims=a.claim([("recycled", "p1")], 0, lambda item: 10.0))
+    shared_out(*views, claims=c.claim([("recycled", "p1")], 30, lambda item: 9.0))  # too late
+    bid = b.bid(("recycled", "p1"), 31, lambda item: 5.0)
+    shared_out(*views, claims=bid)
+    assert {v.owner("p1") for v in views} == {"robot1"}
+    # robot1 came nearer meanwhile (cost 7 now): 5 is not clearly below 7, it declines.
+    assert a.answer(bid[0], 7.0) == []
+    assert {v.owner("p1") for v in views} == {"robot1"}
+    # A claim of the first epochs is no bid: the contest decides, the owner hands nothing.
+    early = Claim(agent="robot2", group="recyclers", item="p1", epoch=3, cost=0.0)
+    assert a.answer(early, 99.0) == []
+    # Later robot1 is far (cost 12): robot2's 5 is clearly sooner, the item goes to it.
+    handover = a.answer(bid[0], 12.0)
+    assert [(x.agent, x.to, x.released, x.epoch, x.cost) for x in handover] == [
+        ("robot1", "robot2", True, 31, 5.0)
+    ]
+    shared_out(*views, claims=handover)
+    assert {v.owner("p1") for v in views} == {"robot2"}
+    assert all(set(v.held["p1"]) == {"robot2"} for v in views)  # robot3's late claim ended too
+    assert a.answer(bid[0], 99.0) == []  # not ours to give any more
+
+
+def test_an_owner_with_more_work_hands_over_sooner_and_never_what_it_holds() -> None:
+    a = Claims("robot1", "recyclers", frozenset({"recycled"}))
+    b = Claims("robot2", "recyclers", frozenset({"recycled"}))
+    shared_out(a, b, claims=a.claim([("recycled", "p1"), ("recycled", "p2")], 0, lambda i: 4.0))
+    # robot1 has p1 to do as well: p2 costs it 4 + LOAD_COST (5); robot2 idle at 5.
+    bid = b.bid(("recycled", "p2"), 9, lambda item: 5.0)
+    shared_out(a, claims=bid)
+    assert a.answer(bid[0], 4.0, in_hand={"p2"}) == []  # in hand: never given
+    handover = a.answer(bid[0], 4.0)
+    assert [x.to for x in handover] == ["robot2"]
+    shared_out(b, claims=handover)
+    assert a.owner("p2") == b.owner("p2") == "robot2"
+    assert a.owner("p1") == b.owner("p1") == "robot1"
+
+
+def test_a_handover_is_a_release_to_another_agent() -> None:
+    with pytest.raises(ValueError, match="handover"):
+        Claim(agent="robot1", group="g", item="p1", to="robot2")
+    with pytest.raises(ValueError, match="handover"):
+        Claim(agent="robot1", group="g", item="p1", released=True, to="robot1")
+    with pytest.raises(msgspec.ValidationError):
+        msgspec.convert(
+            {"agent": "robot1", "group": "g", "item": "p1", "released": True, "to": "no way"},
+            Claim,
+        )
+
+
+def test_an_item_won_but_wanted_by_no_desire_is_given_back() -> None:
+    a = Claims("robot1", "recyclers", frozenset({"recycled"}))
+    a.claim([("recycled", "p1"), ("recycled", "p2")], 0, lambda item: 1.0)
+    out = a.unpursued({"p2", "p9"})
+    assert [(c.item, c.released) for c in out] == [("p2", True)]
+    assert a.owner("p2") is None and a.owner("p1") == "robot1"
+
+
+def with_costs(mind: Mind, costs: dict[str, float]) -> Mind:
+    mind.knowledge.cost = lambda beliefs, agent, item: costs[item]  # type: ignore[method-assign]
+    return mind
+
+
+def test_a_robot_that_saw_an_item_late_but_is_clearly_nearer_takes_it_over() -> None:
+    """Seen in real time on paper-7x7 with three robots: whoever saw two items first
+    claimed both, and the robot that came near the second later never took part."""
+    r1 = with_costs(Mind(load_agent(AGENT, "robot1")), {"p1": 2.0, "p2": 6.0})
+    r2 = with_costs(Mind(load_agent(AGENT, "robot2")), {"p1": 9.0, "p2": 9.0})
+    tell(r1.on_percepts(seen("robot1", 0, ("p1", (1, 1)), ("p2", (1, 2)))), r2)
+    assert goal(r1) == [("recycled", "p1"), ("recycled", "p2")]
+    assert "recycle" not in r2.desires  # robot2 sees both far: no bid
+    r2.on_percepts(seen("robot2", 10, ("p1", (1, 1)), ("p2", (1, 2))))
+    assert "recycle" not in r2.desires
+    # robot2 walked near p2 (cost 2 against robot1's 6 + 5 for p1): it bids.
+    r2.knowledge.cost = lambda beliefs, agent, item: {"p1": 9.0, "p2": 2.0}[item]  # type: ignore[method-assign]
+    bid = r2.on_percepts(seen("robot2", 11, ("p1", (1, 1)), ("p2", (1, 3))))
+    assert [(c.item, c.cost) for c in bid.claims] == [("p2", 2.0)]
+    answers = tell(bid, r1)
+    handover = [c for a in answers for c in a.claims]
+    assert [(c.item, c.to) for c in handover] == [("p2", "robot2")]
+    assert goal(r1) == [("recycled", "p1")]  # robot1 plans again for the rest
+    starts = [c for a in answers for c in a.commands if c.kind == "start_search"]
+    assert starts and starts[0].reason == "goal reduced"
+    tell(Reaction(claims=handover), r2)
+    r2.on_percepts(seen("robot2", 12, ("p1", (1, 1)), ("p2", (1, 3))))
+    assert goal(r2) == [("recycled", "p2")]

@@ -11,7 +11,16 @@ cheapest claim (`cost`: the claimer's path length to it), and each goes to the c
 with the lowest cost plus `LOAD_COST` for every item it already got (so one robot near
 all the items does not get all of them), ties to the first name. An agent that holds an
 item claims it again with cost `IN_HAND` (negative), and a holder owns its item whatever
-the other claims say; an agent strips the
+the other claims say.
+
+A later claim is a bid: an agent that wants an item another owns bids when it can do it
+clearly sooner (`sooner`: its cost plus `LOAD_COST` for each item it owns, against the
+owner's last told cost plus `LOAD_COST` for each other item the owner has, by at least
+`HANDOVER` and `HANDOVER_SHARE` of the owner's), and bids again only once its cost fell
+by `HANDOVER` more. The owner alone decides, from its cost now: it hands the item over
+(a release `to` the bidder; every agent then keeps only the bidder's claim on it) or
+declines. One decider and a margin: the team does not churn. A bid never joins the
+contest of an item's first claims (it is made later than `WINDOW` after them). An agent strips the
 atoms of items others own from its desires, and drops a desire left with no goal. A
 claim is released when the agent gives the atom up (its desire dropped), so another
 agent may take the item, and when the atom is achieved: the release says so
@@ -26,11 +35,18 @@ from dataclasses import dataclass, field
 
 from cbdi.wire.agent import Claim
 
-__all__ = ["IN_HAND", "LOAD_COST", "WINDOW", "Claims"]
+__all__ = ["HANDOVER", "HANDOVER_SHARE", "IN_HAND", "LOAD_COST", "WINDOW", "Claims", "sooner"]
 
 LOAD_COST = 5.0  # what one more item in hand weighs against a longer way to the next
 WINDOW = 5  # epochs: claims this close to an item's first claim compete for it
 IN_HAND = -1.0  # the cost of a claim on an item in hand
+HANDOVER = 3.0  # a bid wins an item over by at least this much less cost ...
+HANDOVER_SHARE = 0.2  # ... and by at least this share of the owner's
+
+
+def sooner(bid: float, owner: float) -> bool:
+    """Return whether a bidder's cost `bid` is clearly below the owner's `owner`."""
+    return bid + max(HANDOVER, HANDOVER_SHARE * owner) < owner
 
 
 @dataclass
@@ -93,6 +109,81 @@ class Claims:
             )
         return out
 
+    def bid(self, atom: tuple[str, ...], epoch: int, costs: Callable[[str], float]) -> list[Claim]:
+        """Bid for the item of `atom`, which another agent owns, if this agent can do it
+        clearly sooner (and sooner by `HANDOVER` than its last bid); return the message."""
+        item = self.claimable(atom)
+        owner = self.owner(item) if item is not None else None
+        if item is None or owner is None or owner == self.agent:
+            return []
+        holders = self.held[item]
+        told = holders[owner][1]
+        first = min(e for e, _ in holders.values())
+        if told < 0 or epoch <= first + WINDOW:
+            return []  # held in hand, or the contest of its first claims still open
+        cost = float(costs(item))
+        last = holders.get(self.agent)
+        if last is not None and last[1] - cost < HANDOVER:
+            return []  # no better than our bid already told
+        if not sooner(self.eta(self.agent, item, cost), self.eta(owner, item, told)):
+            return []
+        holders[self.agent] = (epoch, cost)
+        self._owners = None
+        return [Claim(agent=self.agent, group=self.group, item=item, epoch=epoch, cost=cost)]
+
+    def answer(self, bid: Claim, cost: float, in_hand: Iterable[str] = ()) -> list[Claim]:
+        """As the owner of `bid`'s item, whose cost of it is `cost` now: hand the item over
+        to a bidder that can do it clearly sooner; return the handover (none: declined,
+        or the item is not ours to give, or in hand, or the bid is one of the first
+        claims, which compete as such)."""
+        item = bid.item
+        holders = self.held.get(item, {})
+        mine, theirs = holders.get(self.agent), holders.get(bid.agent)
+        first = min((epoch for epoch, _ in holders.values()), default=bid.epoch)
+        if (
+            bid.released
+            or bid.epoch <= first + WINDOW  # made about the same time: the contest decides
+            or mine is None
+            or theirs is None
+            or self.owner(item) != self.agent
+            or mine[1] < 0
+            or item in set(in_hand)
+        ):
+            return []
+        if sooner(self.eta(bid.agent, item, theirs[1]), self.eta(self.agent, item, cost)):
+            return [self._hand_over(item, bid.agent, theirs)]
+        return []  # declined: the bidder bids again only once nearer by HANDOVER
+
+    def _hand_over(self, item: str, to: str, bid: tuple[int, float]) -> Claim:
+        self.held[item] = {to: bid}
+        self._owners = None
+        return Claim(
+            agent=self.agent,
+            group=self.group,
+            item=item,
+            released=True,
+            to=to,
+            epoch=bid[0],
+            cost=bid[1],
+        )
+
+    def eta(self, agent: str, item: str, cost: float) -> float:
+        """What `item` costs `agent` with its load: `cost` plus `LOAD_COST` for each other
+        item the agent owns."""
+        others = sum(1 for i, a in self.assignment().items() if a == agent and i != item)
+        return cost + LOAD_COST * others
+
+    def unpursued(self, items: Iterable[str]) -> list[Claim]:
+        """Give up `items`, which this agent owns but pursues in no desire (a bid won
+        after the rules stopped wanting it: kept, nobody would do it); return the
+        messages."""
+        out = []
+        for item in sorted(set(items) & self.owned()):
+            del self.held[item][self.agent]
+            out.append(Claim(agent=self.agent, group=self.group, item=item, released=True))
+        self._owners = None if out else self._owners
+        return out
+
     def on_claim(self, claim: Claim) -> bool:
         """Take in another agent's claim or release; return whether it counts here."""
         if claim.group != self.group or claim.agent == self.agent:
@@ -101,7 +192,9 @@ class Claims:
             return False  # not a goal this group shares out
         holders = self.held.setdefault(claim.item, {})
         self._owners = None
-        if claim.achieved:  # the contest is over: every claim on the item ends, ours too
+        if claim.to:  # handed over: the bidder's claim alone stands
+            self.held[claim.item] = {claim.to: (claim.epoch, claim.cost)}
+        elif claim.achieved:  # the contest is over: every claim on the item ends, ours too
             del self.held[claim.item]
         elif claim.released:
             holders.pop(claim.agent, None)
@@ -136,6 +229,10 @@ class Claims:
             owners[item] = winner
             load[winner] = load.get(winner, 0) + 1
         return owners
+
+    def owned(self) -> set[str]:
+        """The items this agent owns."""
+        return {item for item, owner in self.assignment().items() if owner == self.agent}
 
     def foreign(self, atom: tuple[str, ...]) -> str | None:
         """Return the other agent that owns `atom`'s item, or None if it is free or ours."""

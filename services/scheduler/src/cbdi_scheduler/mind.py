@@ -95,11 +95,13 @@ class Mind:
         out.events += self.requested
         self.requested = []
         events, self.events = self.events, []
-        if out.beliefs_changed or self.epoch == 0 or self.refire or events:
+        if out.beliefs_changed or self.epoch == 0 or self.refire or events or self._unpursued():
             # After a drop the rules fire again even on unchanged beliefs: what made the
             # desire (an object still waiting there) may well make it again.
             self.refire = False
             self._fire(out, events)
+            if self.claims is not None:  # given back: what we own and no desire pursues
+                out.claims += self.claims.unpursued(self._unpursued())
         self._coordinate(out)
         self._stop_or_resume(out)
         self._deliberate(out)
@@ -196,7 +198,7 @@ class Mind:
         passing = [e for e in events if not self.beliefs.holds(e)]
         seen = self.beliefs.adding(passing) if passing else self.beliefs
         fired = fire_rules(self.spec.rules, seen, self.desires, self.now)
-        desires = self._unclaimed(fired.desires)
+        desires = self._unclaimed(fired.desires, out)
         added = [d for n, d in desires.items() if n not in self.desires]
         boosted = [n for n in fired.boosted if n in desires and desires[n] != self.desires.get(n)]
         beliefs = fired.beliefs.removing(passing) if passing else fired.beliefs
@@ -207,8 +209,9 @@ class Mind:
         out.asks += [a for a in fired.asks if a not in self.asking and a.agent != self.agent]
         self.asking = frozenset(fired.asks)
 
-    def _unclaimed(self, desires: dict[str, Desire]) -> dict[str, Desire]:
-        """Leave out what rules just added to our desires that another agent owns."""
+    def _unclaimed(self, desires: dict[str, Desire], reaction: Reaction) -> dict[str, Desire]:
+        """Leave out what rules just added to our desires that another agent owns; bid
+        for those we could do clearly sooner (`Claims.bid`)."""
         claims = self.claims
         if claims is None:
             return desires
@@ -217,6 +220,9 @@ class Mind:
         for name, d in desires.items():
             held = self.desires.get(name)
             old = set(held.goal) if held is not None else set()
+            for g in d.goal:
+                if g not in old and not self.beliefs.holds(g) and not self._ours(g.atom, in_hand):
+                    reaction.claims += claims.bid(g.atom, self.epoch, self._cost)
             goal = tuple(g for g in d.goal if g in old or self._takes(g, in_hand))
             if held is not None and set(goal) == old:
                 out[name] = held  # what a boost brought was all others': nothing new
@@ -337,13 +343,32 @@ class Mind:
     def _in_hand(self) -> set[str]:
         return self.knowledge.in_hand(self.beliefs, self.agent)
 
+    def _cost(self, item: str) -> float:
+        return self.knowledge.cost(self.beliefs, self.agent, item)
+
+    def _unpursued(self) -> set[str]:
+        """The items we own that no desire pursues and we do not hold."""
+        if self.claims is None:
+            return set()
+        owned = self.claims.owned() - self._in_hand()
+        if not owned:
+            return owned
+        atoms = (g.atom for d in self.desires.values() for g in d.goal)
+        return owned - {self.claims.claimable(a) for a in atoms}
+
     # -- claims in the group -------------------------------------------------------------
     def on_claim(self, claim: Claim) -> Reaction:
         """Another agent of the group claimed (or released) a goal object."""
         out = Reaction()
-        if self.claims is None or not self.claims.on_claim(claim):
+        if self.claims is None:
             return out
-        self.refire = self.refire or claim.released  # the rules may take the item up now
+        had = self.claims.owned()
+        if not self.claims.on_claim(claim):
+            return out
+        # The rules may take an item up now: given up, or a contest turned our way.
+        self.refire = self.refire or claim.released or not self.claims.owned() <= had
+        if not claim.released and self.claims.owner(claim.item) == self.agent:  # a bid
+            out.claims += self.claims.answer(claim, self._cost(claim.item), self._in_hand())
         if claim.achieved:  # the claimer achieved the goal atom: the group believes it
             before = self.beliefs
             self.beliefs = self.beliefs.adding([fact(*claim.achieved)])
@@ -367,7 +392,7 @@ class Mind:
             out.claims += claims.claim(
                 (g.atom for g in mine if not self.beliefs.holds(g)),
                 self.epoch,
-                lambda item: self.knowledge.cost(self.beliefs, self.agent, item),
+                self._cost,
                 in_hand=in_hand,
             )
             if len(mine) == len(desire.goal):

@@ -313,7 +313,9 @@ class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
 
     How claims decide is `cbdi_scheduler.claims` (docs/agents.md): claims made about the
     same time compete by `cost` (the claimer's way to the object) and the load each
-    claimer already has; a much later claim never takes the object over. `achieved`: a
+    claimer already has; a later claim is a bid, which the owner answers by handing the
+    object over (`released` with `to`: the bidder, whose `epoch` and `cost` the handover
+    repeats) when the bidder can do it clearly sooner. `achieved`: a
     release because the claimer achieved the goal atom (`["delivered", "p1"]`, its
     second symbol the item): the group believes it, and every claim on the object ends.
     """
@@ -325,9 +327,12 @@ class Claim(Message, frozen=True, tag="cbdi.agent.Claim/1"):
     cost: Finite = 0.0
     released: bool = False
     achieved: Annotated[list[Symbol], msgspec.Meta(max_length=32)] = []
+    to: Annotated[str, msgspec.Meta(max_length=63, pattern=r"^([A-Za-z][A-Za-z0-9_\-]*)?$")] = ""
 
     def __post_init__(self) -> None:
         if self.achieved and not self.released:
             raise ValueError("only a release says a goal was achieved")
+        if self.to and (not self.released or self.achieved or self.to == self.agent):
+            raise ValueError(f"a handover to {self.to} is a release to another agent, not achieved")
         if self.achieved and (len(self.achieved) < 2 or self.achieved[1] != self.item):
             raise ValueError(f"achieved {self.achieved} is not a goal atom on item {self.item}")
