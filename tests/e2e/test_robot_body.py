@@ -1,10 +1,9 @@
 """The robot-body example (docs/robot-body): three recycling robots on the paper's map,
 each driven by its own process (a pymunk body under velocity control that performs
 `move` and senses its place), the world simulating the rest. In lockstep the run ends
-done with every item recycled, and each robot's moves were its body's. (Not asserted:
-which robot recycles what, nor that two such runs are the same: the body asks the world
-from within a call, and the world may serve that request in the next epoch, see
-docs/your-own-domain.md.)"""
+done with every item recycled, each robot's moves were its body's, and a second run
+with fresh bodies is the same run (the same trace digest): what a body asks the world
+from within a call is served in the call's epoch (docs/your-own-domain.md)."""
 
 from __future__ import annotations
 
@@ -12,6 +11,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -22,13 +22,14 @@ pytestmark = pytest.mark.e2e
 EXAMPLE = REPO / "docs/robot-body"
 
 
-def test_three_bodies_drive_their_robots_in_lockstep(tmp_path: Path) -> None:
+def run_bodies(tmp_path: Path, tag: str) -> tuple[dict[str, Any], list[str]]:
+    """One lockstep run of the example with three fresh bodies: its summary, their logs."""
     port = free_port()
     router = f"tcp/127.0.0.1:{port}"
     bodies = [
         Proc(
             [sys.executable, str(EXAMPLE / "body.py"), f"robot{n}", router, "--seed", str(n)],
-            tmp_path / f"body{n}.log",
+            tmp_path / f"{tag}-body{n}.log",
         )
         for n in (1, 2, 3)
     ]
@@ -49,7 +50,12 @@ def test_three_bodies_drive_their_robots_in_lockstep(tmp_path: Path) -> None:
         for b in bodies:
             b.stop()
     assert up.returncode == 0, up.stderr[-3000:]
-    summary = json.loads(up.stdout)
+    summary: dict[str, Any] = json.loads(up.stdout)
+    return summary, said
+
+
+def test_three_bodies_drive_their_robots_in_lockstep(tmp_path: Path) -> None:
+    summary, said = run_bodies(tmp_path, "first")
     assert summary["result"] == "done" and not summary["stalls"], summary
     assert sum(a["recycled"] for a in summary["stats"]["agents"].values()) == 3, summary
     performed = summary["performed"]
@@ -62,3 +68,5 @@ def test_three_bodies_drive_their_robots_in_lockstep(tmp_path: Path) -> None:
     counts = summary["stats"]["agents"]
     for a in counts:
         assert 0 < counts[a]["moves"] <= performed[a]["move"], counts
+    again, _ = run_bodies(tmp_path, "again")
+    assert again["trace_digest"] == summary["trace_digest"], (again["stats"], summary["stats"])

@@ -102,6 +102,10 @@ def test_two_robots_seeing_the_same_litter_share_it_out() -> None:
     assert sorted(c.item for c in out2.claims) == ["p1", "p2"]
     tell(out1, r2)
     tell(out2, r1)
+    # The claims are weighed at the next cycle, all at once.
+    assert goal(r1) == [("recycled", "p1")] and len(goal(r2)) == 2
+    r1.on_percepts(seen("robot1", 1, ("p1", (1, 1))))
+    r2.on_percepts(seen("robot2", 1, ("p1", (1, 1)), ("p2", (1, 2))))
     assert goal(r1) == [("recycled", "p1")]  # robot1 won the tie on p1
     assert goal(r2) == [("recycled", "p2")]
     # robot2 searches again for what is left of its goal: a new search, not a union.
@@ -129,7 +133,8 @@ def test_losing_part_of_an_active_goal_restarts_the_search_without_it() -> None:
     r2 = Mind(load_agent(AGENT, "robot2"))
     out = r2.on_percepts(seen("robot2", 3, ("p1", (1, 1)), ("p2", (1, 2))))
     assert [c.kind for c in out.commands] == ["start_search"]
-    late = r2.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=2))
+    assert r2.on_claim(Claim(agent="robot1", group="recyclers", item="p1", epoch=2)).commands == []
+    late = r2.on_percepts(seen("robot2", 4, ("p1", (1, 1)), ("p2", (1, 2))))
     starts = [c for c in late.commands if c.kind == "start_search"]
     assert starts and starts[0].reason == "goal reduced"
     assert starts[0].desire is not None and starts[0].desire.goal == (fact("recycled", "p2"),)
@@ -355,8 +360,9 @@ def test_a_robot_that_saw_an_item_late_but_is_clearly_nearer_takes_it_over() -> 
     answers = tell(bid, r1)
     handover = [c for a in answers for c in a.claims]
     assert [(c.item, c.to) for c in handover] == [("p2", "robot2")]
+    after = r1.on_percepts(seen("robot1", 12, ("p1", (1, 1)), ("p2", (1, 2))))
     assert goal(r1) == [("recycled", "p1")]  # robot1 plans again for the rest
-    starts = [c for a in answers for c in a.commands if c.kind == "start_search"]
+    starts = [c for c in after.commands if c.kind == "start_search"]
     assert starts and starts[0].reason == "goal reduced"
     tell(Reaction(claims=handover), r2)
     r2.on_percepts(seen("robot2", 12, ("p1", (1, 1)), ("p2", (1, 3))))

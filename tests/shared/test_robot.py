@@ -1,7 +1,8 @@
 """A robot's own process in lockstep (`cbdi.robot.Robot`), on the in-memory bus: the
 world's ticks drive its performers' `call.sleep`, their outcomes carry the epoch they
-ended in and come before the epoch's ack, which counts them; its sensors read once per
-period of simulated time and stamp what they tell with the epoch."""
+ended in and come before the epoch's ack, which counts them; the calls the executor
+starts in an epoch run to their first wait before the epoch is done; its sensors read
+once per period of simulated time and stamp what they tell with the epoch."""
 
 from __future__ import annotations
 
@@ -33,10 +34,14 @@ class Walk:
 
     def __init__(self) -> None:
         self.halfway: list[float] = []
+        self.asked: list[str] = []  # what it asked before its first wait (a body: the world)
 
     async def perform(self, call: ActionCall) -> Outcome:
         if call.args[-1] == "nowhere":
             return Outcome.failure("no such place")
+        for _ in range(3):  # something that takes a few turns of the loop, not a sleep
+            await asyncio.sleep(0)
+        self.asked.append(call.args[-1])
         await call.sleep(call.duration / 2)
         self.halfway.append(call.duration)
         await call.sleep(call.duration / 2)
@@ -97,26 +102,34 @@ async def test_a_performer_in_lockstep_ends_at_the_epoch_its_sleeps_end() -> Non
                     epoch=epoch, time=float(epoch), epoch_duration=1.0, speed=0.0, lockstep=True
                 )
                 await publish(world, keys.world_stream("clock"), tick, block=True)
-                while (ack := (await anext(acks))[1]).epoch < epoch:
-                    pass
-                assert ack.epoch == epoch and ack.stage == "done"
-                counted = ack.sent.get(outcomes_key("robot1"), 0)
-                while len(ended) < counted:  # what the ack counts has come
-                    ended.append((await anext(outcomes))[1])
-                if epoch == 0:  # the executor's dispatch of epoch 0: a 3 s walk, a bad one
-                    for rid, where in (("w1", "kitchen"), ("w2", "nowhere")):
-                        req = ActionRequest(
-                            agent="robot1", action="walk", request_id=rid,
-                            args=["robot1", where], duration=3.0,
-                        )  # fmt: skip
-                        key = performer_key("robot1", "walk")
-                        reply = await request(executor, key, req, ActionReply)
-                        assert reply.accepted and (reply.starts_at, reply.ends_at) == (0.0, 3.0)
+                for stage in ("beliefs", "done"):
+                    ack = (await anext(acks))[1]
+                    assert (ack.epoch, ack.stage) == (epoch, stage)
+                    counted = ack.sent.get(outcomes_key("robot1"), 0)
+                    while len(ended) < counted:  # what the ack counts has come
+                        ended.append((await anext(outcomes))[1])
+                    if stage == "done":
+                        break
+                    if epoch == 0:  # the executor's dispatch of epoch 0: a 3 s walk, a bad one
+                        for rid, where in (("w1", "kitchen"), ("w2", "nowhere")):
+                            req = ActionRequest(
+                                agent="robot1", action="walk", request_id=rid,
+                                args=["robot1", where], duration=3.0,
+                            )  # fmt: skip
+                            key = performer_key("robot1", "walk")
+                            reply = await request(executor, key, req, ActionReply)
+                            assert reply.accepted
+                            assert (reply.starts_at, reply.ends_at) == (0.0, 3.0)
+                    done = EpochAck(agent="robot1", epoch=epoch, component="executor")
+                    await publish(executor, keys.epoch_ack("robot1", "executor"), done, block=True)
+                # The walk ran to its first wait before the epoch was done (what it asks
+                # there, the world serves in this epoch).
+                assert walk.asked == ["kitchen"]
     finally:
         running.cancel()
         for h in helpers:
             h.cancel()
-    # The bad walk failed at once: counted in epoch 1's ack, stamped epoch 0 (its start).
+    # The bad walk failed at once: counted in epoch 0's done ack, stamped 0 (its start).
     # The walk slept 1.5 + 1.5 simulated seconds: woken at epochs 2 and 3, it ended at 3.
     assert [(o.request_id, o.status, o.epoch) for o in ended] == [
         ("w2", "failed", 0),

@@ -15,7 +15,11 @@ At each tick it lets each call started in the epoch before run until it waits, w
 calls whose `call.sleep` ends by the tick's time and lets them run until they wait again
 or end (their outcomes go out, stamped with the epoch), reads each sensor that is due
 (every 1/`rate` simulated seconds: the agent applies what changed before its percepts of
-the next epoch), and then acknowledges the epoch with what it sent. What the robot does
+the next epoch), and acknowledges the epoch's first stage (`beliefs`, what the
+executor waits for). Once the executor has acknowledged the epoch (its requests of the
+epoch are in, their calls started), it lets those calls run until they wait, and then
+acknowledges the epoch as `done`, what the world waits for: whatever a call asks the
+world before its first wait (a body's move) is served in the call's epoch. What the robot does
 so depends only on the run's inputs, not on the machine's pace, provided its performers
 wait only with `call.sleep` and its sensors read only the robot's own state: a call that
 awaits anything else is waited for up to `settle` wall seconds and logged
@@ -49,7 +53,7 @@ from cbdi.sensor import Sensor, SensorLoop, read_and_tell, run_sensor
 from cbdi.view import world_info
 from cbdi.wire.agent import ExecutorStop
 from cbdi.wire.base import Message
-from cbdi.wire.world import ActionOutcome, ActionRequest, Tick
+from cbdi.wire.world import ActionOutcome, ActionRequest, EpochAck, Tick
 
 __all__ = ["MEMBER", "Robot", "SimSleeper"]
 
@@ -57,6 +61,7 @@ MEMBER = "performer"  # the component name of a robot's process in lockstep
 EPS = 1e-9
 SETTLE = 5.0  # wall s a performer's call may take to reach its next `call.sleep`
 ASK_EVERY = 1.0  # wall s between asks of the world's info until it answers
+ACK_WAIT = 30.0  # wall s to wait for the executor's ack of an epoch (a killed one: late)
 
 
 class SimSleeper:
@@ -130,17 +135,20 @@ class Robot:
         sink: ErrorSink | None = None,
         timeout: float = 2.0,
         settle: float = SETTLE,
+        ack_wait: float = ACK_WAIT,
     ) -> None:
         keys.validate_name(agent)
         self.bus, self.agent = bus, agent
         self.errors = sink or LogSink()
-        self.timeout, self.settle = timeout, settle
+        self.timeout, self.settle, self.ack_wait = timeout, settle, ack_wait
         self.log = Log(keys.member(agent, MEMBER))
         self.hosts: dict[str, PerformerHost] = {}
         self.sensing: list[_Sensing] = []
         self.clock = SimSleeper()
         self.lockstep: bool | None = None  # None: not known yet (the world's info says)
         self.epoch = -1  # the latest epoch acknowledged (lockstep)
+        self.dispatched = -1  # the latest epoch the agent's executor acknowledged
+        self._executor = asyncio.Condition()
 
     def perform(self, action: str, performer: Performer) -> None:
         """Serve `performer` as the agent's performer of `action`."""
@@ -166,6 +174,7 @@ class Robot:
         """Serve the performers and read the sensors until cancelled."""
         tasks = [asyncio.create_task(self._serve(h)) for h in self.hosts.values()]
         tasks += [asyncio.create_task(self._ticks()), asyncio.create_task(self._stops())]
+        tasks.append(asyncio.create_task(self._executor_acks()))
         tasks.append(asyncio.create_task(self._mode()))
         try:
             await asyncio.gather(*tasks)
@@ -234,7 +243,26 @@ class Robot:
                 s.loop.epoch = tick.epoch
                 await read_and_tell(self.bus, s.loop, self.timeout, s.log)
         self.epoch = tick.epoch
+        await send_ack(self.bus, self.agent, MEMBER, tick.epoch, "beliefs")
+        await self._dispatched(tick.epoch)
+        await self._settled()  # the calls the executor started, to their first wait
         await send_ack(self.bus, self.agent, MEMBER, tick.epoch)
+
+    async def _executor_acks(self) -> None:
+        key = keys.epoch_ack(self.agent, "executor")
+        async for _key, ack in messages(self.bus, key, EpochAck, self.errors):
+            async with self._executor:
+                self.dispatched = max(self.dispatched, ack.epoch)
+                self._executor.notify_all()
+
+    async def _dispatched(self, epoch: int) -> None:
+        """Wait until the executor acknowledged `epoch` (its requests of the epoch are
+        in), at most `ack_wait` wall seconds: then it is logged, and the epoch goes on."""
+        try:
+            async with asyncio.timeout(self.ack_wait), self._executor:
+                await self._executor.wait_for(lambda: self.dispatched >= epoch)
+        except TimeoutError:
+            self.log.warning("upstream_late", epoch=epoch, late=keys.member(self.agent, "executor"))
 
     async def _settled(self) -> None:
         """Let every call run until it waits in `call.sleep` or has ended (at most

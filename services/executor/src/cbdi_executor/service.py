@@ -151,7 +151,7 @@ class ExecutorService:
             if scheduler in members:
                 needs.append(Need(scheduler, epoch))
             if robot in members:  # the outcomes of its calls that ended by this epoch
-                needs.append(Need(robot, epoch))
+                needs.append(Need(robot, epoch, "beliefs"))
             released = await self.lockstep.gate.wait(needs, self.ack_timeout)
             if released.late:
                 self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))

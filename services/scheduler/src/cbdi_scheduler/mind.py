@@ -358,7 +358,9 @@ class Mind:
 
     # -- claims in the group -------------------------------------------------------------
     def on_claim(self, claim: Claim) -> Reaction:
-        """Another agent of the group claimed (or released) a goal object."""
+        """Another agent of the group claimed (or released) a goal object: take it in
+        (and answer a bid); the next cycle weighs the claims, all that came by then at
+        once, so that a view of some of them (a contest half heard) drops nothing."""
         out = Reaction()
         if self.claims is None:
             return out
@@ -373,8 +375,6 @@ class Mind:
             before = self.beliefs
             self.beliefs = self.beliefs.adding([fact(*claim.achieved)])
             self.changed = self.changed or self.beliefs != before
-        self._coordinate(out)
-        self._deliberate(out)
         return out
 
     def _coordinate(self, out: Reaction) -> None:

@@ -143,6 +143,7 @@ def agent_grants(agent: str, components: Iterable[str], group: str = "") -> list
                 keys.CLOCK,
                 keys.world_for_agent(agent),
                 keys.agent_stream(agent, "executor", "stop"),
+                keys.epoch_ack(agent, "executor"),  # lockstep: its calls of an epoch are in
                 keys.ALIVE_ALL,
             ),
             # A performer is the agent's body: it may carry an action out in a
