@@ -21,6 +21,7 @@ from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.lines import Line, Purpose
 from cbdi_planner.agent.offline import Execution
 from cbdi_planner.agent.steps import held_at_start
+from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import Sensed, commit
 from cbdi_planner.errors import Unsolvable
 from cbdi_planner.pddl import parse_domain
@@ -106,6 +107,7 @@ def test_the_offline_planner_plans_from_where_a_busy_robot_s_drive_leaves_it() -
         time=0.0,
     )
     e.on_status(running)
+    assert ("idle", "robot1") in e.held(DOMAIN)  # what a failed search is judged from
     c = e.commit(DOMAIN, floor(19.0, busy=True), GOAL, sensed_at=1.0)
     assert (c.count, c.after, c.ends) == (1, "p-1", 2.0)
     init = {(a.predicate, *a.args) for a in c.problem.init}
@@ -129,3 +131,24 @@ def test_the_online_planner_grounds_a_busy_robot_s_task_with_its_running_drive()
     core.line.statuses[0], core.line.began[0] = "running", 0.0
     task = core.task(GOAL)
     assert DRIVE in {a.name for a in task.actions}
+
+
+def test_a_busy_robot_s_goal_behind_something_that_moves_is_blocked_not_unsolvable() -> None:
+    """Mid-drive a cart takes the cell beyond: the failed search is told blocked (wait
+    for the cart), judged from what the drive started from, not from the beliefs alone
+    (busy, not idle: from them nothing could start, moving things or not)."""
+    core = ContinualPlanner(
+        "robot1", DOMAIN, PlanningSettings(), improve=False, transients=Transients(["clear"])
+    )
+    core.on_beliefs(floor(20.0, busy=False), 0.0)  # every cell seen clear
+    cart = floor(19.0, busy=True).removing([fact("clear", "c_3_1")])
+    core.on_beliefs(cart, 1.0)
+    assert core._blocked(GOAL) is False  # nothing runs, as far as the planner knows
+    core.line = Line(
+        "p", Purpose.NEW, 0.0, steps=[ScheduledAction(0.0, DRIVE, 2.0)], step_ids=["p-1"]
+    )
+    core.line.statuses[0], core.line.began[0] = "running", 0.0
+    assert core._blocked(GOAL) is True
+    assert core.groundings.blocked(cart, GOAL, core.held()) in (True, None)
+    assert core.transients.blocked(DOMAIN, cart, GOAL, core.held()) is True
+    assert core.transients.blocked(DOMAIN, cart, GOAL) is False
