@@ -84,6 +84,15 @@ def test_a_drive_uses_its_charge_once_whatever_the_beliefs_show() -> None:
         done = commit(task, steps, {0: "running"}, 0, Sensed(now, {0: 0.0}))
         assert done.state is not None
         assert value(task, done.state, "(battery robot1)") == 19.0
+    # Sensed as it ended (t=2: at c_2_1, idle again, the charge used) while its status
+    # still says running: its start shows though `idle` is back (the end gave it back).
+    ended = floor(19.0, busy=False).removing([fact("at", "robot1", "c_1_1")])
+    ended = ended.adding([fact("at", "robot1", "c_2_1"), fact("clear", "c_1_1")])
+    ended = ended.removing([fact("clear", "c_2_1")])
+    task = Groundings(DOMAIN).task(ended, GOAL, held)
+    done = commit(task, steps, {0: "running"}, 0, Sensed(2.0, {0: 0.0}))
+    assert done.state is not None and value(task, done.state, "(battery robot1)") == 19.0
+    assert "(at robot1 c_2_1)" in task.fact_names(done.state.facts)
     # Without the times, a started step is applied whole (the charge twice).
     task = Groundings(DOMAIN).task(floor(19.0, busy=True), GOAL, held)
     done = commit(task, steps, {0: "running"}, 0)
