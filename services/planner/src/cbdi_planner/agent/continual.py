@@ -257,9 +257,11 @@ class ContinualPlanner(Following, AgentTasks):
         improve_on: float = math.inf,
         min_commit_steps: int | None = None,
         mode: str = G,
+        whole: bool = False,
     ) -> list[Message]:
         """Start a search from the committed state of the executing line (committing
-        the started steps and `min_commit_steps` more, by default the settings')."""
+        the started steps and `min_commit_steps` more, by default the settings');
+        `mode` and `whole` as for `SearchThread`."""
         line, req = self.line, self.request
         assert line is not None and req is not None
         if min_commit_steps is None:
@@ -289,12 +291,14 @@ class ContinualPlanner(Following, AgentTasks):
                 budget=self.settings.improve_expansions,
             )
         else:
-            thread = self._thread(task, state, prefix=done.count, mode=mode)
+            thread = self._thread(task, state, prefix=done.count, mode=mode, whole=whole)
         self.search = Search(thread, new, purpose, req.request_id, repairs=line)
         self.log("search_from_committed", purpose=purpose, plan=new.plan_id, after=after)
         return []
 
-    def _thread(self, task: Task, state: State, prefix: int = 0, mode: str = G) -> SearchThread:
+    def _thread(
+        self, task: Task, state: State, prefix: int = 0, mode: str = G, whole: bool = False
+    ) -> SearchThread:
         settings = self.settings
         return SearchThread(
             task,
@@ -303,6 +307,7 @@ class ContinualPlanner(Following, AgentTasks):
             empty_rounds=settings.empty_rounds,
             agenda=settings.agenda,
             mode=mode,
+            whole=whole,
         )
 
     # -- rounds ---------------------------------------------------------------------------
@@ -343,13 +348,7 @@ class ContinualPlanner(Following, AgentTasks):
                 better = event  # a round may find several: the last is the best
             elif isinstance(event, ModeChanged):
                 self.log("fall_back", plan=search.line.plan_id, mode=event.mode)
-                thread = search.thread
-                if (
-                    isinstance(thread, SearchThread)
-                    and thread.sent
-                    and search.line is self.line
-                    and search.purpose == Purpose.NEW
-                ):
+                if self._replaces_own_plan(search):
                     # Alg. 2 lines 11-14: the complete search starts over from the
                     # committed state, not after the greedy partial plans already out
                     # (they may lead where the goal is out of reach: a battery spent).
@@ -357,6 +356,14 @@ class ContinualPlanner(Following, AgentTasks):
                         search, self.settings.min_commit_steps, NG
                     )
             elif isinstance(event, SearchFailed):
+                if not event.proved and self._replaces_own_plan(search):
+                    # The complete search exhausted what lay after its own partial plans,
+                    # which proves nothing: search the whole space from the committed
+                    # state, handing out only a plan that reaches the goal.
+                    self.log("search_whole", plan=search.line.plan_id)
+                    return out + self._again_from_committed(
+                        search, self.settings.min_commit_steps, NG, whole=True
+                    )
                 out += self._failed(search, event.reason)
         if better is not None and self.search is search:
             # Lines 23-24: the best plan of the round replaces the executing one after
@@ -373,6 +380,17 @@ class ContinualPlanner(Following, AgentTasks):
             self.search = None
         return out
 
+    def _replaces_own_plan(self, search: Search) -> bool:
+        """Whether `search` is a new plan's that sent partial plans, executing now: a
+        search from the committed state may replace them."""
+        thread = search.thread
+        return (
+            isinstance(thread, SearchThread)
+            and thread.sent > 0
+            and search.line is self.line
+            and search.purpose == Purpose.NEW
+        )
+
     def _outdated(self, search: Search, events: list[Event]) -> list[Message] | None:
         """Drop `search` if execution committed past its prefix (Alg. 2 line 9): its
         rounds' reports, and a new plan's search again after what runs now. None: it
@@ -388,12 +406,14 @@ class ContinualPlanner(Following, AgentTasks):
         self.last_forecast = ("", "", "")
         rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
         if search.purpose == Purpose.NEW:
-            # A new plan must come: search again after what runs now.
-            return rounds + self._again_from_committed(search, 0)
+            # A new plan must come: search again after what runs now (the whole space
+            # again if that is what was searched).
+            whole = isinstance(search.thread, SearchThread) and search.thread.whole
+            return rounds + self._again_from_committed(search, 0, NG if whole else G, whole)
         return rounds
 
     def _again_from_committed(
-        self, search: Search, min_commit_steps: int, mode: str = G
+        self, search: Search, min_commit_steps: int, mode: str = G, whole: bool = False
     ) -> list[Message]:
         """Replace `search` (a new plan's) by one from the committed state of the
         executing line; report the search failed if there is no committed state."""
@@ -405,7 +425,9 @@ class ContinualPlanner(Following, AgentTasks):
             task = self.task(request.goal)
         except (GoalError, PlannerError) as exc:
             return self._failed(search, str(exc))
-        self._from_committed(Purpose.NEW, task, min_commit_steps=min_commit_steps, mode=mode)
+        self._from_committed(
+            Purpose.NEW, task, min_commit_steps=min_commit_steps, mode=mode, whole=whole
+        )
         if self.search is None:
             return self._failed(search, "the executing plan's committed part cannot be simulated")
         return []
