@@ -34,6 +34,7 @@ from cbdi_planner.agent.lines import (
     plan_prefix,
     round_report,
     search_status,
+    sent_own_plan,
 )
 from cbdi_planner.agent.problem import (
     GoalError,
@@ -259,9 +260,8 @@ class ContinualPlanner(Following, AgentTasks):
         mode: str = G,
         whole: bool = False,
     ) -> list[Message]:
-        """Start a search from the committed state of the executing line (committing
-        the started steps and `min_commit_steps` more, by default the settings');
-        `mode` and `whole` as for `SearchThread`."""
+        """Start a search (`mode`, `whole`: `SearchThread`'s) from the committed state of
+        the executing line (the started steps and `min_commit_steps` more)."""
         line, req = self.line, self.request
         assert line is not None and req is not None
         if min_commit_steps is None:
@@ -348,7 +348,7 @@ class ContinualPlanner(Following, AgentTasks):
                 better = event  # a round may find several: the last is the best
             elif isinstance(event, ModeChanged):
                 self.log("fall_back", plan=search.line.plan_id, mode=event.mode)
-                if self._replaces_own_plan(search):
+                if sent_own_plan(search, self.line):
                     # Alg. 2 lines 11-14: the complete search starts over from the
                     # committed state, not after the greedy partial plans already out
                     # (they may lead where the goal is out of reach: a battery spent).
@@ -356,10 +356,9 @@ class ContinualPlanner(Following, AgentTasks):
                         search, self.settings.min_commit_steps, NG
                     )
             elif isinstance(event, SearchFailed):
-                if not event.proved and self._replaces_own_plan(search):
-                    # The complete search exhausted what lay after its own partial plans,
-                    # which proves nothing: search the whole space from the committed
-                    # state, handing out only a plan that reaches the goal.
+                if not event.proved and sent_own_plan(search, self.line):
+                    # Exhausted after its own partial plans, which proves nothing: search
+                    # the whole space from the committed state (`SearchThread.whole`).
                     self.log("search_whole", plan=search.line.plan_id)
                     return out + self._again_from_committed(
                         search, self.settings.min_commit_steps, NG, whole=True
@@ -380,17 +379,6 @@ class ContinualPlanner(Following, AgentTasks):
             self.search = None
         return out
 
-    def _replaces_own_plan(self, search: Search) -> bool:
-        """Whether `search` is a new plan's that sent partial plans, executing now: a
-        search from the committed state may replace them."""
-        thread = search.thread
-        return (
-            isinstance(thread, SearchThread)
-            and thread.sent > 0
-            and search.line is self.line
-            and search.purpose == Purpose.NEW
-        )
-
     def _outdated(self, search: Search, events: list[Event]) -> list[Message] | None:
         """Drop `search` if execution committed past its prefix (Alg. 2 line 9): its
         rounds' reports, and a new plan's search again after what runs now. None: it
@@ -406,8 +394,7 @@ class ContinualPlanner(Following, AgentTasks):
         self.last_forecast = ("", "", "")
         rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
         if search.purpose == Purpose.NEW:
-            # A new plan must come: search again after what runs now (the whole space
-            # again if that is what was searched).
+            # A new plan must come: search again (as searched) after what runs now.
             whole = isinstance(search.thread, SearchThread) and search.thread.whole
             return rounds + self._again_from_committed(search, 0, NG if whole else G, whole)
         return rounds
