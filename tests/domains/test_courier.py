@@ -45,16 +45,23 @@ def sensed(s: CourierSimulator) -> Sensed:
     return p
 
 
-def test_a_drive_uses_charge_and_a_robot_senses_where_it_arrives(tmp_path: Path) -> None:
+def test_a_drive_uses_charge_and_a_robot_senses_where_it_is(tmp_path: Path) -> None:
+    """Mid-drive a robot senses its state as it is, not as the drive will leave it:
+    still at the cell it left, busy, the charge used; both cells taken. Where the drive
+    leaves it is the planner's to work out (tests/planner/test_running_steps.py)."""
     s = sim(tmp_path)
     reply = drive(s, "c_1_4", "c_2_4")
     assert reply.accepted and reply.ends_at == 2.0
-    mid = sensed(s)  # mid-drive: the robot's state as the drive leaves it
-    assert ["at", "robot1", "c_2_4"] in mid.add and ["idle", "robot1"] in mid.add
+    mid = sensed(s)
+    assert ["at", "robot1", "c_1_4"] in mid.add and ["at", "robot1", "c_2_4"] in mid.delete
+    assert ["idle", "robot1"] in mid.delete
     assert mid.fluents == [(["battery", "robot1"], 19.0)]
-    assert ["clear", "c_1_4"] in mid.add and ["clear", "c_2_4"] in mid.delete
+    assert ["clear", "c_1_4"] in mid.delete and ["clear", "c_2_4"] in mid.delete
     end = s.step()
     assert [o.status for o in end.outcomes] == ["succeeded"]
+    arrived = next(p for p in end.percepts if isinstance(p, Sensed) and p.agent == "robot1")
+    assert ["at", "robot1", "c_2_4"] in arrived.add and ["idle", "robot1"] in arrived.add
+    assert ["clear", "c_1_4"] in arrived.add
     busy = drive(s, "c_2_4", "c_9_9", 2)
     assert not busy.accepted and "not a floor cell" in busy.reason
 

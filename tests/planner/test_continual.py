@@ -15,6 +15,7 @@ from cbdi_planner.continual import (
     COMMITTED_FAILS,
     FAILS_LATER,
     HOLDS,
+    NG,
     ImprovedPlan,
     ModeChanged,
     Outdated,
@@ -119,6 +120,51 @@ def test_greedy_falls_back_to_complete_search_then_reports_unsolvable() -> None:
     kinds = [type(e) for e in events if not isinstance(e, RoundDone)]
     assert kinds == [ModeChanged, SearchFailed]
     assert "complete search" in events[-1].reason  # type: ignore[attr-defined]
+    assert events[-1].proved  # type: ignore[attr-defined]  # it never re-rooted
+
+
+ROAD = """(define (domain road)
+  (:requirements :strips :typing :fluents :durative-actions)
+  (:types place)
+  (:predicates (at ?p - place) (road ?p ?q - place) (depot ?p - place))
+  (:functions (fuel))
+  (:durative-action go
+    :parameters (?p ?q - place)
+    :duration (= ?duration 1)
+    :condition (and (at start (at ?p)) (at start (road ?p ?q)) (at start (>= (fuel) 1)))
+    :effect (and (at start (not (at ?p))) (at start (decrease (fuel) 1)) (at end (at ?q))))
+  (:durative-action refuel
+    :parameters (?p - place)
+    :duration (= ?duration 1)
+    :condition (and (at start (at ?p)) (at start (depot ?p)))
+    :effect (at end (assign (fuel) 3))))"""
+# One-way roads a -> b -> c -> d, fuel for two legs: refuel at a first. The relaxed
+# graph never runs out of fuel, so going to b looks like progress.
+TRIP = """(define (problem trip) (:domain road)
+  (:objects a b c d - place)
+  (:init (at a) (depot a) (road a b) (road b c) (road c d) (= (fuel) 2))
+  (:goal (at d)))"""
+
+
+def test_an_exhausted_search_that_re_rooted_proves_nothing_the_whole_search_does() -> None:
+    """The complete search re-roots on its partial plan (go to b) and exhausts there
+    (out of fuel at c): not a proof (`proved` False). Searching the whole space from
+    the origin, handing out only the plan that reaches the goal, finds it."""
+    domain = parse_domain(ROAD)
+    trip = ground(domain, parse_problem(TRIP, domain))
+    bound = RoundBound(expansions=1, plan_size=1)
+    events = run(SearchThread(trip, initial_state(trip), mode=NG), bound)
+    sent = [e for e in events if isinstance(e, PartialPlanFound)]
+    assert [a.name for e in sent for a in e.plan.actions] == ["go a b"]
+    assert isinstance(events[-1], SearchFailed) and not events[-1].proved
+    whole = SearchThread(trip, initial_state(trip), mode=NG, whole=True)
+    events = run(whole, bound)
+    [plan] = [e for e in events if isinstance(e, PartialPlanFound)]
+    assert plan.complete and plan.baseline == 0
+    assert [a.name for a in plan.plan.actions] == ["refuel a", "go a b", "go b c", "go c d"]
+    simulate_validate(trip, plan.plan)
+    with pytest.raises(ValueError, match="complete search"):
+        SearchThread(trip, initial_state(trip), whole=True)
 
 
 def test_improving_mode_sends_only_a_better_plan(task: Task) -> None:

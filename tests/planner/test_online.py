@@ -335,3 +335,37 @@ def test_a_step_of_another_plan_taken_up_ends_the_running_one() -> None:
     core.on_request(replace(request(goal=("p2",)), request_id="s2"))
     plans = [m for m in drain(core) if isinstance(m, PartialPlan)]
     assert plans and plans[0].applies_after != f"{first.plan_id}-1"
+
+
+def test_a_new_plan_whose_complete_search_ran_into_a_dead_end_searches_the_whole_space() -> None:
+    """The complete search's partial plans (a to b to c) lead where the fuel runs out
+    before e; its exhausted space after them proves nothing. A search of the whole space
+    from the committed state replaces them with the plan that refuels first."""
+    from test_continual import ROAD
+
+    trip = """(define (problem trip) (:domain road)
+      (:objects a b c d e - place)
+      (:init (at a) (depot a) (road a b) (road b a) (road b c) (road c d) (road d e)
+             (= (fuel) 3))
+      (:goal (at e)))"""
+    settings = PlanningSettings(
+        round_interval=0, expansions_per_round=3, plan_size_limit=2, min_commit_steps=0
+    )
+    domain = parse_domain(ROAD.replace("(assign (fuel) 3)", "(assign (fuel) 4)"))
+    core = ContinualPlanner("robot1", domain, settings, improve=False)
+    req = SearchRequest(
+        agent="robot1", request_id="s1", kind="start", desire="go", goal=[], problem=trip
+    )
+    out = core.on_request(req) + drain(core)
+    plans = [m for m in out if isinstance(m, PartialPlan)]
+    assert [s.action for s in plans[0].steps] == ["go"] and not plans[0].complete
+    last = plans[-1]
+    assert last.complete and last.baseline == ""  # a line of its own, from the start
+    assert [(s.action, s.args) for s in last.steps] == [
+        ("refuel", ["a"]),
+        ("go", ["a", "b"]),
+        ("go", ["b", "c"]),
+        ("go", ["c", "d"]),
+        ("go", ["d", "e"]),
+    ]
+    assert [m.status for m in out if isinstance(m, SearchStatus)] == ["searching", "done"]

@@ -21,6 +21,7 @@ from cbdi_planner.agent.grounded import Groundings, reaches_goal
 from cbdi_planner.agent.lines import Line, Purpose
 from cbdi_planner.agent.offline import Execution
 from cbdi_planner.agent.steps import held_at_start
+from cbdi_planner.agent.transient import Transients
 from cbdi_planner.continual import Sensed, commit
 from cbdi_planner.errors import Unsolvable
 from cbdi_planner.pddl import parse_domain
@@ -83,6 +84,15 @@ def test_a_drive_uses_its_charge_once_whatever_the_beliefs_show() -> None:
         done = commit(task, steps, {0: "running"}, 0, Sensed(now, {0: 0.0}))
         assert done.state is not None
         assert value(task, done.state, "(battery robot1)") == 19.0
+    # Sensed as it ended (t=2: at c_2_1, idle again, the charge used) while its status
+    # still says running: its start shows though `idle` is back (the end gave it back).
+    ended = floor(19.0, busy=False).removing([fact("at", "robot1", "c_1_1")])
+    ended = ended.adding([fact("at", "robot1", "c_2_1"), fact("clear", "c_1_1")])
+    ended = ended.removing([fact("clear", "c_2_1")])
+    task = Groundings(DOMAIN).task(ended, GOAL, held)
+    done = commit(task, steps, {0: "running"}, 0, Sensed(2.0, {0: 0.0}))
+    assert done.state is not None and value(task, done.state, "(battery robot1)") == 19.0
+    assert "(at robot1 c_2_1)" in task.fact_names(done.state.facts)
     # Without the times, a started step is applied whole (the charge twice).
     task = Groundings(DOMAIN).task(floor(19.0, busy=True), GOAL, held)
     done = commit(task, steps, {0: "running"}, 0)
@@ -106,6 +116,7 @@ def test_the_offline_planner_plans_from_where_a_busy_robot_s_drive_leaves_it() -
         time=0.0,
     )
     e.on_status(running)
+    assert ("idle", "robot1") in e.held(DOMAIN)  # what a failed search is judged from
     c = e.commit(DOMAIN, floor(19.0, busy=True), GOAL, sensed_at=1.0)
     assert (c.count, c.after, c.ends) == (1, "p-1", 2.0)
     init = {(a.predicate, *a.args) for a in c.problem.init}
@@ -129,3 +140,24 @@ def test_the_online_planner_grounds_a_busy_robot_s_task_with_its_running_drive()
     core.line.statuses[0], core.line.began[0] = "running", 0.0
     task = core.task(GOAL)
     assert DRIVE in {a.name for a in task.actions}
+
+
+def test_a_busy_robot_s_goal_behind_something_that_moves_is_blocked_not_unsolvable() -> None:
+    """Mid-drive a cart takes the cell beyond: the failed search is told blocked (wait
+    for the cart), judged from what the drive started from, not from the beliefs alone
+    (busy, not idle: from them nothing could start, moving things or not)."""
+    core = ContinualPlanner(
+        "robot1", DOMAIN, PlanningSettings(), improve=False, transients=Transients(["clear"])
+    )
+    core.on_beliefs(floor(20.0, busy=False), 0.0)  # every cell seen clear
+    cart = floor(19.0, busy=True).removing([fact("clear", "c_3_1")])
+    core.on_beliefs(cart, 1.0)
+    assert core._blocked(GOAL) is False  # nothing runs, as far as the planner knows
+    core.line = Line(
+        "p", Purpose.NEW, 0.0, steps=[ScheduledAction(0.0, DRIVE, 2.0)], step_ids=["p-1"]
+    )
+    core.line.statuses[0], core.line.began[0] = "running", 0.0
+    assert core._blocked(GOAL) is True
+    assert core.groundings.blocked(cart, GOAL, core.held()) in (True, None)
+    assert core.transients.blocked(DOMAIN, cart, GOAL, core.held()) is True
+    assert core.transients.blocked(DOMAIN, cart, GOAL) is False

@@ -403,21 +403,14 @@ class CourierSimulator:
         )
 
     def _sensed(self, robot: _Robot) -> Sensed:
-        """What `robot` senses, its own state as it will be once its running action
-        ends (what it does next starts then: the executor runs one action at a time),
-        so that a plan made mid-drive starts where the drive arrives."""
+        """What `robot` senses now, as a robot's own sensors would: mid-drive it is still
+        at the cell it left (the one it drives into is taken), busy, its battery already
+        used; what its running action will leave is the planner's to work out (the
+        committed state, `cbdi_planner.continual.commit`)."""
         d = self.floor.sensing
         (ax, ay) = robot.cell
-        a = robot.action
-        going = a.target if a and a.name == "drive" and a.target and not a.broken else None
-        cell = going or robot.cell
-        carrying = a.args[1] if a and a.name == "grab" else robot.carrying
-        dropping = [a.args[1]] if a and a.name == "drop" else []
-        delivered = [p for p in dict.fromkeys([*self.delivered, *dropping]) if p in self.resting]
-        delivered += [p for p in dropping if p not in delivered]
-        opening = a.target if a and a.name == "open_door" else None
-        charging = a is not None and a.name == "charge"
-        add: list[list[str]] = [["at", robot.name, cell_name(cell)]]
+        delivered = [p for p in dict.fromkeys(self.delivered) if p in self.resting]
+        add: list[list[str]] = [["at", robot.name, cell_name(robot.cell)]]
         delete: list[list[str]] = []
         for y in range(ay - d, ay + d + 1):
             for x in range(ax - d, ax + d + 1):
@@ -425,16 +418,15 @@ class CourierSimulator:
                 if not self.floor.floor_cell(c):
                     continue
                 n = cell_name(c)
-                clear = not self._occupied(c) or (going is not None and c == robot.cell)
-                (add if clear else delete).append(["clear", n])
+                (delete if self._occupied(c) else add).append(["clear", n])
                 if c in self.open:
-                    (add if self.open[c] or c == opening else delete).append(["open", n])
-                if c != cell:
+                    (add if self.open[c] else delete).append(["open", n])
+                if c != robot.cell:
                     delete.append(["at", robot.name, n])
                 for p in self.goal:
                     (add if self.parcels.get(p) == c else delete).append(["parcel_at", p, n])
         for p in self.goal:
-            (add if carrying == p else delete).append(["carrying", robot.name, p])
+            (add if robot.carrying == p else delete).append(["carrying", robot.name, p])
         add += [["delivered", p] for p in delivered]
         # A parcel that comes back is an order: every robot is told where it waits (out
         # of sight too), and that it is no longer delivered.
@@ -447,9 +439,9 @@ class CourierSimulator:
             if waits is not None and max(abs(waits[0] - ax), abs(waits[1] - ay)) > d:
                 add.append(["parcel_at", p, cell_name(waits)])
         for pred, holds in (
-            ("idle", True),
-            ("empty", not carrying),
-            ("charged", robot.charged or charging),
+            ("idle", robot.action is None),
+            ("empty", not robot.carrying),
+            ("charged", robot.charged),
         ):
             (add if holds else delete).append([pred, robot.name])
         return Sensed(
@@ -458,9 +450,7 @@ class CourierSimulator:
             time=self.time,
             add=add,
             delete=delete,
-            fluents=[
-                (["battery", robot.name], float(self.floor.battery) if charging else robot.battery)
-            ],
+            fluents=[(["battery", robot.name], robot.battery)],
         )
 
     def _snapshot(self) -> WorldSnapshot:

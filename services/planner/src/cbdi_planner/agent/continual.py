@@ -34,6 +34,7 @@ from cbdi_planner.agent.lines import (
     plan_prefix,
     round_report,
     search_status,
+    sent_own_plan,
 )
 from cbdi_planner.agent.problem import (
     GoalError,
@@ -257,9 +258,10 @@ class ContinualPlanner(Following, AgentTasks):
         improve_on: float = math.inf,
         min_commit_steps: int | None = None,
         mode: str = G,
+        whole: bool = False,
     ) -> list[Message]:
-        """Start a search from the committed state of the executing line (committing
-        the started steps and `min_commit_steps` more, by default the settings')."""
+        """Start a search (`mode`, `whole`: `SearchThread`'s) from the committed state of
+        the executing line (the started steps and `min_commit_steps` more)."""
         line, req = self.line, self.request
         assert line is not None and req is not None
         if min_commit_steps is None:
@@ -289,12 +291,14 @@ class ContinualPlanner(Following, AgentTasks):
                 budget=self.settings.improve_expansions,
             )
         else:
-            thread = self._thread(task, state, prefix=done.count, mode=mode)
+            thread = self._thread(task, state, prefix=done.count, mode=mode, whole=whole)
         self.search = Search(thread, new, purpose, req.request_id, repairs=line)
         self.log("search_from_committed", purpose=purpose, plan=new.plan_id, after=after)
         return []
 
-    def _thread(self, task: Task, state: State, prefix: int = 0, mode: str = G) -> SearchThread:
+    def _thread(
+        self, task: Task, state: State, prefix: int = 0, mode: str = G, whole: bool = False
+    ) -> SearchThread:
         settings = self.settings
         return SearchThread(
             task,
@@ -303,6 +307,7 @@ class ContinualPlanner(Following, AgentTasks):
             empty_rounds=settings.empty_rounds,
             agenda=settings.agenda,
             mode=mode,
+            whole=whole,
         )
 
     # -- rounds ---------------------------------------------------------------------------
@@ -343,13 +348,7 @@ class ContinualPlanner(Following, AgentTasks):
                 better = event  # a round may find several: the last is the best
             elif isinstance(event, ModeChanged):
                 self.log("fall_back", plan=search.line.plan_id, mode=event.mode)
-                thread = search.thread
-                if (
-                    isinstance(thread, SearchThread)
-                    and thread.sent
-                    and search.line is self.line
-                    and search.purpose == Purpose.NEW
-                ):
+                if sent_own_plan(search, self.line):
                     # Alg. 2 lines 11-14: the complete search starts over from the
                     # committed state, not after the greedy partial plans already out
                     # (they may lead where the goal is out of reach: a battery spent).
@@ -357,6 +356,13 @@ class ContinualPlanner(Following, AgentTasks):
                         search, self.settings.min_commit_steps, NG
                     )
             elif isinstance(event, SearchFailed):
+                if not event.proved and sent_own_plan(search, self.line):
+                    # Exhausted after its own partial plans, which proves nothing: search
+                    # the whole space from the committed state (`SearchThread.whole`).
+                    self.log("search_whole", plan=search.line.plan_id)
+                    return out + self._again_from_committed(
+                        search, self.settings.min_commit_steps, NG, whole=True
+                    )
                 out += self._failed(search, event.reason)
         if better is not None and self.search is search:
             # Lines 23-24: the best plan of the round replaces the executing one after
@@ -388,12 +394,13 @@ class ContinualPlanner(Following, AgentTasks):
         self.last_forecast = ("", "", "")
         rounds: list[Message] = [self._round(search, e) for e in events if isinstance(e, RoundDone)]
         if search.purpose == Purpose.NEW:
-            # A new plan must come: search again after what runs now.
-            return rounds + self._again_from_committed(search, 0)
+            # A new plan must come: search again (as searched) after what runs now.
+            whole = isinstance(search.thread, SearchThread) and search.thread.whole
+            return rounds + self._again_from_committed(search, 0, NG if whole else G, whole)
         return rounds
 
     def _again_from_committed(
-        self, search: Search, min_commit_steps: int, mode: str = G
+        self, search: Search, min_commit_steps: int, mode: str = G, whole: bool = False
     ) -> list[Message]:
         """Replace `search` (a new plan's) by one from the committed state of the
         executing line; report the search failed if there is no committed state."""
@@ -405,7 +412,9 @@ class ContinualPlanner(Following, AgentTasks):
             task = self.task(request.goal)
         except (GoalError, PlannerError) as exc:
             return self._failed(search, str(exc))
-        self._from_committed(Purpose.NEW, task, min_commit_steps=min_commit_steps, mode=mode)
+        self._from_committed(
+            Purpose.NEW, task, min_commit_steps=min_commit_steps, mode=mode, whole=whole
+        )
         if self.search is None:
             return self._failed(search, "the executing plan's committed part cannot be simulated")
         return []

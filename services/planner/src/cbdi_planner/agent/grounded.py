@@ -119,9 +119,14 @@ class Groundings:
         self._last = (beliefs, wanted, task)
         return task
 
-    def blocked(self, beliefs: BeliefSet, goal: Sequence[Sequence[str]]) -> bool | None:
+    def blocked(
+        self, beliefs: BeliefSet, goal: Sequence[Sequence[str]], held: Sequence[Atom] = ()
+    ) -> bool | None:
         """Tell whether `goal` is relaxed-reachable once the missing transient facts hold
-        again, from the cached task; None if it cannot tell (no task for this goal)."""
+        again, from the cached task; None if it cannot tell (no task for this goal).
+        `held`: facts the running steps started from (as for `task`): mid-step the
+        beliefs lack them (a busy robot is not `idle`), and from the beliefs alone
+        nothing would reach the goal, moving things or not."""
         missing = self.transients.missing(beliefs)
         if not missing:
             return False
@@ -136,10 +141,11 @@ class Groundings:
         except Unsolvable:  # not even with every transient fact: not for it to tell
             return None
         index = cached.grounding.fact_index
-        if task is None or any(f not in index for f in missing):
+        restore = [*missing, *(tuple(h) for h in held if h[0] in self.fluent)]
+        if task is None or any(f not in index for f in restore):
             return None
         restored = task.init_facts
-        for f in missing:
+        for f in restore:
             restored |= 1 << index[f]
         return reaches_goal(task, State(restored, task.init_nums))
 

@@ -44,6 +44,7 @@ __all__ = [
     "round_report",
     "running_line",
     "search_status",
+    "sent_own_plan",
 ]
 
 
@@ -109,6 +110,18 @@ def held(domain: Domain, lines: Sequence[Line | None]) -> list[tuple[str, ...]]:
         for step in line.running()
         for f in held_at_start(domain, step.name)
     ]
+
+
+def sent_own_plan(search: Search, executing: Line | None) -> bool:
+    """Whether `search` is a new plan's that sent partial plans, its line `executing`:
+    a search from the committed state may replace them."""
+    thread = search.thread
+    return (
+        isinstance(thread, SearchThread)
+        and thread.sent > 0
+        and search.line is executing
+        and search.purpose == Purpose.NEW
+    )
 
 
 def running_line(lines: Sequence[Line | None]) -> Line | None:

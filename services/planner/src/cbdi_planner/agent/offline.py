@@ -76,6 +76,14 @@ class Execution:
             if status.status == "running":
                 self.began[k] = status.time  # the world's start time
 
+    def running(self) -> list[str]:
+        """The ground actions of the steps that run now."""
+        return [self.steps[k].name for k, st in sorted(self.statuses.items()) if st == "running"]
+
+    def held(self, domain: Domain) -> list[tuple[str, ...]]:
+        """The facts the running steps started from (`held_at_start`)."""
+        return [f for name in self.running() for f in held_at_start(domain, name)]
+
     def follow(self, kept: int, steps: Sequence[PlanStep]) -> None:
         """A plan went out that follows the first `kept` steps: they stay, then it."""
         self.steps = self.steps[:kept]
@@ -127,7 +135,7 @@ class Execution:
         """The task of `problem`, grounded to reach the running steps too: from the
         beliefs alone if they do (a grid robot mid-move), else from the beliefs and
         the facts those steps started from."""
-        running = [self.steps[k].name for k, st in self.statuses.items() if st == "running"]
+        running = self.running()
         try:
             task = ground(domain, problem)
         except Unsolvable:
@@ -135,8 +143,7 @@ class Execution:
         names = {a.name for a in task.actions} if task is not None else set()
         if task is not None and all(name in names for name in running):
             return task
-        held = [f for name in running for f in held_at_start(domain, name)]
-        return Groundings(domain).task(beliefs, goal, held)
+        return Groundings(domain).task(beliefs, goal, self.held(domain))
 
 
 def _leading(statuses: dict[int, str], kinds: tuple[str, ...]) -> int:

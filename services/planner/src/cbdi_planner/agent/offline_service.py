@@ -292,8 +292,10 @@ class OfflinePlannerService(Epochs):
 
     async def failed(self, req: SearchRequest, reason: str, timeout: bool) -> None:
         """Report a failed search: blocked (not a timeout, and the goal is reachable once
-        the transient beliefs hold again) or not."""
-        blocked = not timeout and self.transients.blocked(self.domain, self.beliefs, req.goal)
+        the transient beliefs hold again, from what the running steps started from) or
+        not."""
+        held = self.execution.held(self.domain)
+        blocked = not timeout and self.transients.blocked(self.domain, self.beliefs, req.goal, held)
         if blocked:
             reason += " (blocked by something that moves: waiting for it)"
         self.request_failed = True

@@ -142,13 +142,14 @@ class AgentTasks:
     def _blocked(self, goal: list[list[str]]) -> bool:
         if not goal:
             return False
+        held = self.held()  # a robot mid-step: judged from what its steps started from
         try:
-            known = self.groundings.blocked(self.beliefs, goal)
+            known = self.groundings.blocked(self.beliefs, goal, held)
         except (GoalError, PlannerError):
             return False
         if known is not None:
             return known
-        return self.transients.blocked(self.domain, self.beliefs, goal)
+        return self.transients.blocked(self.domain, self.beliefs, goal, held)
 
     def _failure(
         self, request_id: str, reason: str, goal: list[list[str]], blocked: bool | None = None

@@ -53,12 +53,24 @@ class Transients:
             f for f in self.seen if f not in beliefs.facts and all(a in known for a in f[1:])
         )
 
-    def blocked(self, domain: Domain, beliefs: BeliefSet, goal: Sequence[Sequence[str]]) -> bool:
-        """Return whether `goal` is reachable once the missing transient facts hold again."""
+    def blocked(
+        self,
+        domain: Domain,
+        beliefs: BeliefSet,
+        goal: Sequence[Sequence[str]],
+        held: Sequence[Atom] = (),
+    ) -> bool:
+        """Return whether `goal` is reachable once the missing transient facts hold again.
+
+        `held`: the facts the running steps started from (`held_at_start`). Mid-step the
+        beliefs lack some (a busy robot is not `idle`), and from them alone no action
+        could start: every failure mid-step would look unsolvable. With them the running
+        steps, and what they leave, are in the relaxed graph (an over-approximation of
+        the committed state, as the test is)."""
         missing = self.missing(beliefs)
         if not missing:
             return False
-        relaxed = beliefs.adding(fact(*f) for f in missing)
+        relaxed = beliefs.adding(fact(*f) for f in [*missing, *held])
         try:
             task = ground(domain, problem_from_beliefs(domain, relaxed, goal))
         except (GoalError, PlannerError):

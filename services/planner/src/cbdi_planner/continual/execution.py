@@ -10,7 +10,8 @@ A started step's effects are applied once: the beliefs may show some already, si
 step's status (from the executor) can come after the percepts that show its start or even
 its end. Given when the beliefs were sensed and when each step began (`Sensed`), a
 started step whose start lies before the beliefs and whose start effects on facts all
-show in them has its start counted as shown, and one whose planned end also lies at or
+show in them (but those its end undoes: a drive takes `idle` and gives it back) has its
+start counted as shown, and one whose planned end also lies at or
 before the beliefs and whose end effects on facts all show has ended in them; a shown
 part's numeric effects (an `increase`, a `decrease`) are not applied again. Effects on
 facts are evidence; a part with none is judged by the time alone (an action stretched
@@ -123,9 +124,13 @@ def _shown(
     which began at `began` (unknown: None, neither shows)."""
     if began is None or now is None or now <= began + EPS:
         return False, False
-    start = _shows(action.start, facts)
     if action.end is None:
+        start = _shows(action.start, facts)
         return start, start
+    # What the end undoes of the start tells nothing of the start: a drive's start
+    # takes `idle` and its end gives it back, so an ended drive shows `idle` as if it
+    # never started (its charge would be used twice).
+    start = _shows(action.start, facts, action.end.add | action.end.dele)
     if not start or not _shows(action.end, facts):
         return start, False
     # Past its planned end, or ended early (a performer faster than planned): its end's
@@ -134,10 +139,11 @@ def _shown(
     return start, has_facts or now >= began + duration - EPS
 
 
-def _shows(snap: Snap, facts: int) -> bool:
-    """Whether `facts` show a happening's unconditional effects on facts (True if it has
-    none: then only the time tells)."""
-    return (snap.add & ~facts) == 0 and (snap.dele & ~snap.add & facts) == 0
+def _shows(snap: Snap, facts: int, undone: int = 0) -> bool:
+    """Whether `facts` show a happening's unconditional effects on facts, but those on
+    the facts `undone` (True if it has none: then only the time tells)."""
+    add, dele = snap.add & ~undone, snap.dele & ~snap.add & ~undone
+    return (add & ~facts) == 0 and (dele & facts) == 0
 
 
 def _fits(action: GroundAction, state: State, started: bool) -> bool:

@@ -57,9 +57,16 @@ class ModeChanged:
 
 @dataclass(frozen=True, slots=True)
 class SearchFailed:
-    """Alg. 2 line 22: no plan (the complete search exhausted its space, or gave up)."""
+    """Alg. 2 line 22: no plan (the complete search exhausted its space, or gave up).
+
+    `proved`: the search never re-rooted, so there is no plan from its origin. One that
+    re-rooted on its partial plans searched only what lies after them: they may have led
+    where the goal is out of reach (a battery spent far from the dock), and a search of
+    the whole space from the origin (`SearchThread.whole`) may still find a plan.
+    """
 
     reason: str
+    proved: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,6 +140,8 @@ class SearchThread:
 
     `improving` searches for a plan better than `improve_on` (a makespan) instead of
     handing out partial plans. `empty_rounds` rounds without progress end the search.
+    `whole` (complete search only) hands out no partial plan, only the plan that reaches
+    the goal: it never re-roots, so its exhausted space proves there is no plan.
     """
 
     task: Task
@@ -145,13 +154,17 @@ class SearchThread:
     now: Callable[[], float] = time.monotonic
     agenda: bool = False  # the greedy search reaches the goal facts one at a time
     mode: str = G
+    whole: bool = False
     sent: int = 0
+    rerooted: bool = False
     rounds: int = 0
     empty: int = 0
     finished: bool = False
     plans: list[Plan] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        if self.whole and self.mode != NG:
+            raise ValueError("only the complete search (NG) searches the whole space")
         self.space = SearchSpace(
             self.task,
             self.state,
@@ -169,6 +182,8 @@ class SearchThread:
         if is_goal(self.task, self.space.root.state):  # line 5
             self.finished = True
             return []
+        if self.whole:  # no partial plan: rounds end by time or expansions alone
+            bound = RoundBound(bound.seconds, bound.expansions, None)
         found = self.space.search_round(bound)  # line 6
         self.rounds += 1
         events: list[Event] = [self._stats(found)]
@@ -179,6 +194,8 @@ class SearchThread:
             return events + self._fall_back("the search space is exhausted")
         node = found.node
         assert node is not None
+        if self.whole and found.kind != "goal":
+            return events  # the best state so far is no plan to commit to
         if node is self.space.root:  # no progress this round
             self.empty += 1
             if self.mode == G and self.empty >= self.empty_rounds:
@@ -204,6 +221,7 @@ class SearchThread:
                 events.append(ImprovedPlan(whole, self.improve_on))
             return events
         self.space.reroot(node)  # line 19
+        self.rerooted = True
         return events
 
     def _fall_back(self, why: str) -> list[Event]:
@@ -219,7 +237,7 @@ class SearchThread:
         self.finished = True
         if self.improving:
             return []
-        return [SearchFailed(f"no plan: {why} (complete search)")]
+        return [SearchFailed(f"no plan: {why} (complete search)", proved=not self.rerooted)]
 
     def _stats(self, found: Round) -> RoundDone:
         size = 0
