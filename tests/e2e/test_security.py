@@ -73,7 +73,8 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
         out["act_robot1"] = await _refused(executor, keys.world_act("robot1"), encode(move))
         # On its own key, naming robot1: the world refuses it.
         try:
-            await request(executor, keys.world_act("robot2"), move, ActionReply, timeout=5.0)
+            # An answer is due: a loaded machine may take long (5 s failed at load 9).
+            await request(executor, keys.world_act("robot2"), move, ActionReply, timeout=30.0)
             out["act_own_key"] = "answered"
         except RequestFailedError as exc:
             out["act_own_key"] = exc.code
@@ -94,7 +95,7 @@ async def _attack(endpoint: str, creds: Path) -> dict[str, object]:
             from_agent="robot2", group="recyclers", op="check_belief", belief="(map_loaded)"
         )
         key = keys.agent_request("robot1", "recyclers")
-        out["group_ask"] = (await request(scheduler, key, check, AgentReply, timeout=5.0)).holds
+        out["group_ask"] = (await request(scheduler, key, check, AgentReply, timeout=30.0)).holds
         # The router's admin space (a session answers `@/**` of its own too).
         out["admin"] = await _refused(scheduler, "@/*/router/**", b"")
         out["state"] = await _refused(
