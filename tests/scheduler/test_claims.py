@@ -276,6 +276,11 @@ def test_a_later_robot_bids_only_when_clearly_sooner_and_again_only_when_nearer_
     assert [c.cost for c in b.bid(("recycled", "p1"), 23, lambda item: 2.5)] == [2.5]
     assert b.bid(("recycled", "p2"), 24, lambda item: 0.0) == []  # nobody owns p2
     assert a.bid(("recycled", "p1"), 24, lambda item: 0.0) == []  # ours already
+    # A robot with work of its own does not bid, however near.
+    c = Claims("robot3", "recyclers", frozenset({"recycled"}))
+    shared_out(c, claims=a.claim([("recycled", "p1")], 0, lambda item: 10.0))
+    c.claim([("recycled", "p7")], 30, lambda item: 1.0)
+    assert c.bid(("recycled", "p1"), 31, lambda item: 0.0) == []
 
 
 def test_the_owner_hands_an_item_over_to_a_clearly_sooner_bidder_and_everyone_agrees() -> None:

@@ -13,11 +13,11 @@ all the items does not get all of them), ties to the first name. An agent that h
 item claims it again with cost `IN_HAND` (negative), and a holder owns its item whatever
 the other claims say.
 
-A later claim is a bid: an agent that wants an item another owns bids when it can do it
-clearly sooner (`sooner`: its cost plus `LOAD_COST` for each item it owns, against the
-owner's last told cost plus `LOAD_COST` for each other item the owner has, by at least
-`HANDOVER` and `HANDOVER_SHARE` of the owner's), and bids again only once its cost fell
-by `HANDOVER` more. The owner alone decides, from its cost now: it hands the item over
+A later claim is a bid: an agent that owns no item and wants one another owns bids when
+it can do it clearly sooner (`sooner`: its cost, against the owner's last told cost plus
+`LOAD_COST` for each other item the owner has, by at least `HANDOVER` and
+`HANDOVER_SHARE` of the owner's), and bids again only once its cost fell by `HANDOVER`
+more. The owner alone decides, from its cost now: it hands the item over
 (a release `to` the bidder; every agent then keeps only the bidder's claim on it) or
 declines. One decider and a margin: the team does not churn. A bid never joins the
 contest of an item's first claims (it is made later than `WINDOW` after them). An agent strips the
@@ -114,8 +114,9 @@ class Claims:
         clearly sooner (and sooner by `HANDOVER` than its last bid); return the message."""
         item = self.claimable(atom)
         owner = self.owner(item) if item is not None else None
-        if item is None or owner is None or owner == self.agent:
-            return []
+        if item is None or owner is None or owner == self.agent or self.owned():
+            return []  # only an agent with no work of its own bids (a guess of busy
+            # agents' times against each other moved work back and forth for nothing)
         holders = self.held[item]
         told = holders[owner][1]
         first = min(e for e, _ in holders.values())
