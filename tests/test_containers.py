@@ -141,17 +141,15 @@ def _compose(path: Path, project: str, api: str, *args: str) -> subprocess.Compl
     return _run(argv, path.parent, 900, DOCKER_HOST=api)
 
 
-def _check_recording(recording: Path, both_recycle: bool = True) -> None:
-    """The run ended done, both robots recycled something (or, not `both_recycle`, both
-    moved: in real time one robot may get every item first), the file is a valid MCAP."""
+def _check_recording(recording: Path) -> None:
+    """The run ended done, both robots recycled something, the file is a valid MCAP."""
     inspected = _run(
         [str(BIN / "cbdi"), "inspect", "--json", str(recording)], recording.parent, 120
     )
     assert inspected.returncode == 0, inspected.stderr
     report = json.loads(inspected.stdout)
     assert report["result"] == "done"
-    what = "recycled" if both_recycle else "moves"  # the recycling domain's own counters
-    done = {name: agent["counters"][what] for name, agent in report["agents"].items()}
+    done = {name: agent["counters"]["recycled"] for name, agent in report["agents"].items()}
     assert set(done) == {"robot1", "robot2"} and all(n > 0 for n in done.values()), done
     rerun = shutil.which("rerun", path=str(BIN)) or shutil.which("rerun")
     assert rerun, "rerun (rerun-sdk, a dev dependency) is missing"
@@ -245,9 +243,10 @@ def test_a_run_split_over_two_projects_with_joined_routers(
             print("the second project's logs:\n" + logs.stdout[-30000:])
         assert up.returncode == 0, up.stdout[-4000:] + up.stderr[-2000:]
         try:
-            # robot2's services run in the other project: that it moved shows the split
-            # works; the run's result says every item was recycled
-            _check_recording(tmp_path / "runs" / "paper-7x7.mcap", both_recycle=False)
+            # robot2's services run in the other project, started before this one: both
+            # robots recycle (claims move an item to an idle robot clearly nearer, and a
+            # plan follows the running move, issues 30 and 31)
+            _check_recording(tmp_path / "runs" / "paper-7x7.mcap")
         except AssertionError:
             logs = _compose(there, b, podman_socket, "logs", "--no-color")
             print("the second project's logs:\n" + logs.stdout[-12000:])

@@ -105,8 +105,13 @@ def test_two_robots_seeing_the_same_litter_share_it_out() -> None:
     # The claims are weighed at the next cycle, all at once.
     assert goal(r1) == [("recycled", "p1")] and len(goal(r2)) == 2
     r1.on_percepts(seen("robot1", 1, ("p1", (1, 1))))
-    r2.on_percepts(seen("robot2", 1, ("p1", (1, 1)), ("p2", (1, 2))))
+    lost = r2.on_percepts(seen("robot2", 1, ("p1", (1, 1)), ("p2", (1, 2))))
     assert goal(r1) == [("recycled", "p1")]  # robot1 won the tie on p1
+    # robot2 gives up its claim on what it lost: the contest is over (left open, it
+    # turned whenever an item done elsewhere changed the loads).
+    assert [(c.item, c.released) for c in lost.claims] == [("p1", True)]
+    tell(lost, r1)
+    assert r1.claims is not None and set(r1.claims.held["p1"]) == {"robot1"}
     assert goal(r2) == [("recycled", "p2")]
     # robot2 searches again for what is left of its goal: a new search, not a union.
     assert r2.claims is not None and r2.claims.owner("p1") == "robot1"

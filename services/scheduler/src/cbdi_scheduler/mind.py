@@ -403,6 +403,10 @@ class Mind:
                 self.desires[name] = replace(desire, goal=tuple(mine))
                 reason = "claimed by others: " + ", ".join(owners)
                 out.events.append(self.event(self.desires[name], "reduced", reason))
+                # Our claims on what we lost end, as a dropped desire's do: a contest
+                # kept open by them turned with every item done elsewhere (the loads
+                # changed), and two robots took a parcel from each other in turn.
+                out.claims += claims.release(left)
                 continue
             del self.desires[name]
             reason = "claimed by others: " + ", ".join(owners)
