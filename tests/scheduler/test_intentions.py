@@ -278,3 +278,18 @@ def test_a_wait_can_stall_however_the_beliefs_change() -> None:
         if counts == "waiting":
             assert s.current is not None and s.current.stalled
             assert kinds(again) == ["start_search"] and "blocked for 5 s" in again[0].reason
+
+
+def test_a_step_failing_in_any_plan_a_replacement_follows_fails_the_plan() -> None:
+    """Seen in a courier run: a new plan's line (p2, after p1's running drive s1), the
+    complete search's plan after its first step (p3), and the whole search's after that
+    (p4); the drive of p2 failed, and the scheduler, which knew only p4 and p3, waited in
+    silence: the executor never starts a plan whose predecessor failed."""
+    s = running()
+    s.on_plan(plan("p2", "t1", "t2", baseline="s1", after="s1"))
+    s.on_plan(plan("p3", "u1", "u2", baseline="t1", after="t1"))
+    s.on_plan(plan("p4", "v1", baseline="u1", after="u1"))
+    failed = s.on_status(status("p2", "t1", "failed", "c_2_5 is not clear"))
+    assert kinds(failed) == ["start_search"]
+    assert failed[0].reason == "replan after: c_2_5 is not clear"
+    assert s.on_status(status("p0", "x", "failed")) == []  # not a plan of this intention

@@ -41,7 +41,9 @@ from typing import Literal
 from cbdi.wire.agent import ActionStatus, ArrestReport, PartialPlan
 from cbdi_scheduler.desires import Desire
 
-__all__ = ["Command", "IntentionScheduler", "StallCounts"]
+__all__ = ["FOLLOWED", "Command", "IntentionScheduler", "StallCounts"]
+
+FOLLOWED = 16  # plans a replacement may still follow (a chain of partial plans)
 
 # What a blocked wait's `wait_stall` counts: seconds in which nothing changed ("quiet"),
 # or seconds of waiting, whatever changed meanwhile ("waiting": a cart passing by or a
@@ -69,7 +71,9 @@ class Intention:
     plan_id: str = ""
     steps: list[str] = field(default_factory=list)
     last_started: str = ""
-    previous: str = ""  # the plan a replacement follows: its kept steps still run
+    # The plans replacements follow (newest last): their kept steps may still run, so a
+    # step of any of them failing fails the intention's plan.
+    previous: list[str] = field(default_factory=list)
     plan_failures: int = 0
     exec_failures: int = 0
     waiting: bool = False  # its goal is blocked by something that moves
@@ -196,7 +200,8 @@ class IntentionScheduler:
             return self._pass_on(plan)
         if self.next_desire is not None:
             return []  # a clean preemption is under way: the intention is over
-        cur.previous, cur.steps = cur.plan_id, []
+        cur.previous = [*cur.previous, cur.plan_id][-FOLLOWED:]
+        cur.steps = []
         return self._pass_on(plan)
 
     def _pass_on(self, plan: PartialPlan) -> list[Command]:
@@ -313,7 +318,7 @@ class IntentionScheduler:
     def on_status(self, status: ActionStatus) -> list[Command]:
         """Follow the executor: a failed or refused step means replan (or drop)."""
         cur = self.current
-        if cur is None or status.plan_id not in (cur.plan_id, cur.previous) or not status.plan_id:
+        if cur is None or not status.plan_id or status.plan_id not in (cur.plan_id, *cur.previous):
             return []
         if status.status == "running":
             cur.last_started = status.step_id
@@ -322,7 +327,7 @@ class IntentionScheduler:
         cur.exec_failures += 1
         if cur.exec_failures > self.exec_retries:
             return self._drop(f"execution failed {cur.exec_failures} times: {status.reason}")
-        cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
+        cur.plan_id, cur.previous, cur.steps, cur.last_started = "", [], [], ""
         return [self._search(cur.desire, f"replan after: {status.reason}")]
 
     def executor_restarted(self) -> list[Command]:
@@ -332,7 +337,7 @@ class IntentionScheduler:
         self.stopping = False
         if cur is None or self.halted or not cur.plan_id:
             return []
-        cur.plan_id, cur.previous, cur.steps, cur.last_started = "", "", [], ""
+        cur.plan_id, cur.previous, cur.steps, cur.last_started = "", [], [], ""
         cur.after_restart = True
         return [self._search(cur.desire, "the executor restarted")]
 
