@@ -29,6 +29,7 @@ def run(*argv: str | Path, cwd: Path, timeout: float = 600) -> subprocess.Comple
     )
 
 
+@pytest.mark.timeout(600)  # a venv, its packages and a courier run of about 300 simulated s
 def test_the_courier_domain_runs_without_the_recycling_package(tmp_path: Path) -> None:
     venv = tmp_path / "venv"
     made = run(sys.executable, "-m", "venv", venv, cwd=tmp_path)

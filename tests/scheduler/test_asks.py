@@ -364,4 +364,6 @@ def test_only_an_agent_file_that_asks_gets_its_group_granted() -> None:
     )
     assert agent_groups(corridor_pass) == {"robot1": "recyclers", "robot2": "recyclers"}
     courier = load_scenario(find_scenario(str(REPO / "domains/courier/scenarios/courier.toml")))
-    assert agent_groups(courier) == {}  # the courier's file has a group but never asks
+    assert agent_groups(courier) == {"robot1": "couriers", "robot2": "couriers"}  # ask_way
+    pair = load_scenario(find_scenario(str(REPO / "domains/courier/scenarios/courier-pair.toml")))
+    assert agent_groups(pair) == {}  # courier-jobs.toml has a group but never asks
