@@ -31,6 +31,7 @@ from __future__ import annotations
 import itertools
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -145,21 +146,52 @@ def _cell(value: Any, where: str, field: str, floor_ok: Any) -> Cell:
 def load_floor(path: str | Path) -> Floor:
     """Read and check a courier map file."""
     where = str(path)
+    data = _read_toml(path, where)
+    rows = data.get("layout")
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, str) and r for r in rows):
+        raise ConfigError(where, "layout", "expected a list of non-empty strings")
+    width, height = len(rows[0]), len(rows)
+    if any(len(r) != width for r in rows):
+        raise ConfigError(where, "layout", "every row must be as long as the first")
+    walls, doors, docks, starts = _layout(rows, where)
+
+    def ok(c: Cell) -> bool:
+        return 0 <= c[0] < width and 0 <= c[1] < height and c not in walls
+
+    return Floor(
+        name=str(data.get("name", Path(path).stem)),
+        width=width,
+        height=height,
+        walls=frozenset(walls),
+        doors=frozenset(doors),
+        docks=frozenset(docks),
+        starts=tuple(starts[k] for k in sorted(starts)),
+        parcels=_parcels(data, where, ok),
+        carts=_carts(data, where, ok),
+        epoch_duration=_number(data, "epoch_duration", where, 1e-3, 1e6),
+        sensing=int(_number(data, "sensing", where, 0, 1000)),
+        battery=int(_number(data, "battery", where, 1, 1e6)),
+        door_close_probability=_number(data, "door_close_probability", where, 0, 1),
+    )
+
+
+def _read_toml(path: str | Path, where: str) -> dict[str, Any]:
     try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except OSError as exc:
         raise ConfigError(where, "file", exc.strerror or str(exc)) from None
     except UnicodeDecodeError as exc:
         raise ConfigError(where, "file", f"not UTF-8 text (byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(where, "toml", str(exc)) from None
-    rows = data.get("layout")
-    if not isinstance(rows, list) or not rows or not all(isinstance(r, str) and r for r in rows):
-        raise ConfigError(where, "layout", "expected a list of non-empty strings")
-    width = len(rows[0])
-    if any(len(r) != width for r in rows):
-        raise ConfigError(where, "layout", "every row must be as long as the first")
-    walls, doors, docks, starts = set(), set(), set(), {}
+
+
+def _layout(rows: list[str], where: str) -> tuple[set[Cell], set[Cell], set[Cell], dict[str, Cell]]:
+    """The layout's walls, doors, docks and robot starts (by digit)."""
+    walls: set[Cell] = set()
+    doors: set[Cell] = set()
+    docks: set[Cell] = set()
+    starts: dict[str, Cell] = {}
     for y, row in enumerate(rows):
         for x, ch in enumerate(row):
             if ch == "#":
@@ -174,22 +206,31 @@ def load_floor(path: str | Path) -> Floor:
                 starts[ch] = (x, y)
             elif ch != ".":
                 raise ConfigError(where, "layout", f"row {y}, column {x}: unknown cell {ch!r}")
-    height = len(rows)
+    return walls, doors, docks, starts
 
-    def ok(c: Cell) -> bool:
-        return 0 <= c[0] < width and 0 <= c[1] < height and c not in walls
 
-    parcels: list[Parcel] = []
-    raw_parcels = data.get("parcels", [])
-    if not isinstance(raw_parcels, list):
-        raise ConfigError(where, "parcels", "expected a list of tables")
-    for i, raw in enumerate(raw_parcels):
-        field = f"parcels[{i}]"
+def _named_tables(
+    data: dict[str, Any], key: str, where: str
+) -> list[tuple[str, str, dict[str, Any]]]:
+    """The tables of list `key`, each with its field path and its checked name."""
+    raw_list = data.get(key, [])
+    if not isinstance(raw_list, list):
+        raise ConfigError(where, key, "expected a list of tables")
+    out = []
+    for i, raw in enumerate(raw_list):
+        field = f"{key}[{i}]"
         if not isinstance(raw, dict):
             raise ConfigError(where, field, "expected a table")
         name = raw.get("name")
         if not isinstance(name, str) or not name.isidentifier():
             raise ConfigError(where, f"{field}.name", f"expected a name, got {name!r}")
+        out.append((field, name, raw))
+    return out
+
+
+def _parcels(data: dict[str, Any], where: str, ok: Callable[[Cell], bool]) -> tuple[Parcel, ...]:
+    parcels: list[Parcel] = []
+    for field, name, raw in _named_tables(data, "parcels", where):
         rounds = _number(raw, "rounds", where, 1, 1e6, default=1, field=field)
         if rounds != int(rounds):
             raise ConfigError(where, f"{field}.rounds", f"expected a whole number, got {rounds}")
@@ -200,17 +241,12 @@ def load_floor(path: str | Path) -> Floor:
         )  # fmt: skip
     if len({p.name for p in parcels}) != len(parcels):
         raise ConfigError(where, "parcels", "parcel names must be unique")
+    return tuple(parcels)
+
+
+def _carts(data: dict[str, Any], where: str, ok: Callable[[Cell], bool]) -> tuple[Cart, ...]:
     carts: list[Cart] = []
-    raw_carts = data.get("carts", [])
-    if not isinstance(raw_carts, list):
-        raise ConfigError(where, "carts", "expected a list of tables")
-    for i, raw in enumerate(raw_carts):
-        field = f"carts[{i}]"
-        if not isinstance(raw, dict):
-            raise ConfigError(where, field, "expected a table")
-        name = raw.get("name")
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ConfigError(where, f"{field}.name", f"expected a name, got {name!r}")
+    for field, name, raw in _named_tables(data, "carts", where):
         route = raw.get("route")
         if not isinstance(route, list) or not route:
             raise ConfigError(where, f"{field}.route", "expected a list of cells")
@@ -220,18 +256,4 @@ def load_floor(path: str | Path) -> Floor:
                 raise ConfigError(where, f"{field}.route", f"{list(a)} to {list(b)} is no step")
         step = int(_number(raw, "step", where, 1, 1e6, field=field))
         carts.append(Cart(name, cells, step))
-    return Floor(
-        name=str(data.get("name", Path(path).stem)),
-        width=width,
-        height=height,
-        walls=frozenset(walls),
-        doors=frozenset(doors),
-        docks=frozenset(docks),
-        starts=tuple(starts[k] for k in sorted(starts)),
-        parcels=tuple(parcels),
-        carts=tuple(carts),
-        epoch_duration=_number(data, "epoch_duration", where, 1e-3, 1e6),
-        sensing=int(_number(data, "sensing", where, 0, 1000)),
-        battery=int(_number(data, "battery", where, 1, 1e6)),
-        door_close_probability=_number(data, "door_close_probability", where, 0, 1),
-    )
+    return tuple(carts)

@@ -16,7 +16,6 @@ at a dock fills the battery, `open_door` opens a closed door next to the robot.
 from __future__ import annotations
 
 import random
-from dataclasses import dataclass, field
 
 from cbdi.errors import ConfigError
 from cbdi.simulator import EpochResult, SimulatorConfig
@@ -35,6 +34,7 @@ from cbdi.wire.world import (
     WorldStats,
 )
 from cbdi_courier.floor import Cell, Floor, cell_name, load_floor
+from cbdi_courier.state import CartState, RobotState, RunningAction
 
 __all__ = ["ACTIONS", "DURATIONS", "CourierSimulator"]
 
@@ -43,52 +43,6 @@ DURATIONS = {"drive": 2.0, "open_door": 1.0, "grab": 1.0, "drop": 1.0, "charge":
 ACTIONS = tuple(DURATIONS)
 _ARITY = {"drive": 3, "open_door": 3, "grab": 3, "drop": 3, "charge": 2}
 _EPS = 1e-9
-
-
-@dataclass
-class _Action:
-    name: str
-    args: tuple[str, ...]
-    request_id: str
-    starts_at: float
-    ends_at: float
-    target: Cell | None = None  # drive: the cell taken; open_door: the door
-    broken: str = ""  # why it fails at its end ("" it succeeds)
-
-
-@dataclass
-class _Robot:
-    name: str
-    cell: Cell
-    battery: float
-    carrying: str = ""
-    charged: bool = True
-    action: _Action | None = None
-    busy: float = 0.0
-    counts: dict[str, int] = field(default_factory=dict)
-
-    def count(self, what: str) -> None:
-        self.counts[what] = self.counts.get(what, 0) + 1
-
-
-@dataclass
-class _CartState:
-    name: str
-    route: tuple[Cell, ...]
-    step: int
-    index: int = 0
-    direction: int = 1
-
-    @property
-    def cell(self) -> Cell:
-        return self.route[self.index]
-
-    def next_index(self) -> int:
-        if len(self.route) == 1:
-            return 0
-        if not 0 <= self.index + self.direction < len(self.route):
-            self.direction = -self.direction
-        return self.index + self.direction
 
 
 class CourierSimulator:
@@ -107,7 +61,7 @@ class CourierSimulator:
         self.time = 0.0
         self.doors_rng = random.Random(f"{config.seed}:doors")
         self.robots = {
-            name: _Robot(name, start, float(f.battery))
+            name: RobotState(name, start, float(f.battery))
             for name, start in zip(config.agents, f.starts, strict=False)
         }
         self.parcels: dict[str, Cell] = {p.name: p.at for p in f.parcels}  # lying on the floor
@@ -117,7 +71,7 @@ class CourierSimulator:
         self.resting: set[str] = set()  # delivered, and not (yet) back
         self.returns: dict[str, float] = {}  # parcel -> when it waits at its start again
         self.open = {d: True for d in sorted(f.doors)}
-        self.carts = [_CartState(c.name, c.route, c.step) for c in f.carts]
+        self.carts = [CartState(c.name, c.route, c.step) for c in f.carts]
         self.rejected: dict[str, int] = {}
 
     # -- the host's interface -------------------------------------------------------------
@@ -232,7 +186,7 @@ class CourierSimulator:
         it, the others fail at once, their charge given back (in lockstep a run must not
         depend on which request came first)."""
         began = self.time - self.floor.epoch_duration
-        drives: dict[Cell, list[_Robot]] = {}
+        drives: dict[Cell, list[RobotState]] = {}
         for r in sorted(self.robots.values(), key=lambda r: r.name):
             a = r.action
             if a and a.name == "drive" and a.target is not None and abs(a.starts_at - began) < _EPS:
@@ -260,7 +214,7 @@ class CourierSimulator:
                 )
         return outcomes
 
-    def _check(self, robot: _Robot, req: ActionRequest) -> tuple[str, _Action | None]:
+    def _check(self, robot: RobotState, req: ActionRequest) -> tuple[str, RunningAction | None]:
         name, args = req.action, tuple(req.args)
         if name not in DURATIONS:
             return f"the courier world has no action {name!r} (it has {', '.join(ACTIONS)})", None
@@ -271,7 +225,7 @@ class CourierSimulator:
         cells = {cell_name(c): c for c in self._cells()}
         here = cell_name(robot.cell)
         start = self.time
-        action = _Action(name, args, req.request_id, start, start + DURATIONS[name])
+        action = RunningAction(name, args, req.request_id, start, start + DURATIONS[name])
         if name in ("drive", "open_door"):
             src, dst = cells.get(args[1]), cells.get(args[2])
             if src is None or dst is None:
@@ -353,7 +307,7 @@ class CourierSimulator:
             )
         return outcomes
 
-    def _effect(self, robot: _Robot, action: _Action) -> None:
+    def _effect(self, robot: RobotState, action: RunningAction) -> None:
         if action.name == "drive" and action.target is not None:
             robot.cell = action.target
         elif action.name == "open_door" and action.target is not None:
@@ -402,7 +356,7 @@ class CourierSimulator:
             snapshot=self._snapshot(),
         )
 
-    def _sensed(self, robot: _Robot) -> Sensed:
+    def _sensed(self, robot: RobotState) -> Sensed:
         """What `robot` senses now, as a robot's own sensors would: mid-drive it is still
         at the cell it left (the one it drives into is taken), busy, its battery already
         used; what its running action will leave is the planner's to work out (the

@@ -60,14 +60,7 @@ def problem_text(
         if (x, y) not in world_map.walls
     ]
     taken = set(bins) | set(starts.values()) | standing
-    init = ["(map_loaded)"]
-    for c in cells:
-        if c not in taken:
-            init.append(f"(free {cell_name(c)})")
-        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            n = (c[0] + dx, c[1] + dy)
-            if world_map.inside(n) and n not in world_map.walls:
-                init.append(f"(near {cell_name(c)} {cell_name(n)})")
+    init = ["(map_loaded)", *_floor_facts(world_map, cells, taken)]
     init += [f"(bin_pose {b} {cell_name(c)})" for c, b in sorted(bins.items())]
     init += [f"(litter_pose {i} {cell_name(c)})" for i, c in sorted(items.items())]
     for r, c in starts.items():
@@ -93,6 +86,19 @@ def problem_text(
         f"  (:init\n    {body})\n"
         f"  (:goal (and {goal})))\n"
     )
+
+
+def _floor_facts(world_map: WorldMap, cells: list[Cell], taken: set[Cell]) -> list[str]:
+    """Each cell's `free` (unless `taken`) and its `near` neighbours, in cell order."""
+    facts = []
+    for c in cells:
+        if c not in taken:
+            facts.append(f"(free {cell_name(c)})")
+        for dx, dy in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            n = (c[0] + dx, c[1] + dy)
+            if world_map.inside(n) and n not in world_map.walls:
+                facts.append(f"(near {cell_name(c)} {cell_name(n)})")
+    return facts
 
 
 def main(argv: Sequence[str] | None = None) -> int:
