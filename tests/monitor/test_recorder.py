@@ -235,3 +235,75 @@ def test_damaged_recordings_give_exit_2_and_a_message(
             assert not out.exists()  # a failed export leaves no half copy
         out.unlink(missing_ok=True)
     assert refused >= 6
+
+
+class _Log:
+    def __init__(self) -> None:
+        self.events: list[tuple[str, dict[str, object]]] = []
+
+    def info(self, event: str, **kw: object) -> None:
+        self.events.append((event, kw))
+
+    warning = info
+
+
+class _Replay:
+    """A subscription that hands out fixed samples, then waits (as a live one does)."""
+
+    def __init__(self, samples: list[object]) -> None:
+        self.samples, self.closed = samples, False
+
+    def __aiter__(self) -> object:
+        return self._go()
+
+    async def _go(self) -> object:
+        import asyncio
+
+        for s in self.samples:
+            yield s
+        await asyncio.Event().wait()
+
+    async def close(self) -> None:
+        self.closed = True
+
+
+def test_a_restarted_recorder_catches_up_what_its_first_history_lacked(
+    tmp_path: Path,
+) -> None:
+    """The second ask of the caches writes what was sent while no recorder ran and is in
+    neither the earlier part nor what the first history gave, each once; samples sent
+    after the recorder began are the live subscription's, not the catch-up's."""
+    import asyncio
+    import collections
+    import types
+
+    from cbdi.bus.base import Sample
+    from cbdi_monitor.service import Monitor
+
+    base = tmp_path / "run.mcap"
+    first = McapRecorder(base)
+    for i in range(5):
+        first.write("cbdi/world/clock", tick(i), log_ns=S * i, publish_ns=S * i, seq=i + 1)
+    _killed(first)
+    before, _ = recorded_before(base)
+
+    def sample(i: int) -> Sample:
+        return Sample("cbdi/world/clock", tick(i), seq=i + 1, sent_ns=S * i)
+
+    replay = _Replay([sample(i) for i in (3, 4, 5, 6, 7, 9)])
+    log = _Log()
+    ctx = types.SimpleNamespace(
+        bus=types.SimpleNamespace(subscribe=lambda key, history: replay),
+        counters=collections.Counter(),
+        log=log,
+    )
+    monitor = Monitor(ctx, McapRecorder(base, resume=True), 0.1, before)  # type: ignore[arg-type]
+    monitor.began_ns = S * 8 + 1  # began after epoch 8 was sent
+    monitor.write(sample(7))  # the first history had 7 only (and live 8)
+    monitor.write(Sample("cbdi/world/clock", tick(8), seq=9, sent_ns=S * 8))
+    asyncio.run(monitor.catch_up(after=0, limit=0.5))
+    monitor.recorder.close()
+    assert replay.closed
+    assert sorted(int(m.log_ns // S) for m in read_messages(base)) == list(range(9))
+    assert ("caught_up", {"samples": 2}) in log.events
+    assert ctx.counters["recovered"] == 4 and ctx.counters["caught_up"] == 2

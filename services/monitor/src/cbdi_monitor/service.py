@@ -27,6 +27,13 @@ __all__ = ["MonitorSettings", "monitor_main"]
 
 ALL = keys.ALL
 DRAIN_LIMIT = 30.0  # seconds a stopping monitor may spend writing its backlog
+# A restarted recorder asks the publishers' caches a second time this long after it
+# began, and takes what they send for CATCH_UP_LIMIT s: the first history a subscription
+# gets can lack a publisher's samples (seen once in CI: two ticks sent while no recorder
+# ran were missing while the ticks after them were there), and a sample missing before
+# the first one delivered is never asked for again.
+CATCH_UP_AFTER = 3.0
+CATCH_UP_LIMIT = 10.0
 
 
 @dataclass(frozen=True)
@@ -65,6 +72,9 @@ class Monitor:
         # sent before are history, logged at their publish time, in their place).
         self.before = before
         self.began_ns = time.time_ns()
+        # (key, sent_ns, seq) of every sample this part took from history: the catch-up
+        # writes only what is in neither this set nor the earlier parts.
+        self.recovered: set[tuple[str, int, int]] = set()
 
     async def record(self, sub: Subscription) -> None:
         """Write every sample; on stop, drain what is still arriving, then finish the file."""
@@ -93,6 +103,26 @@ class Monitor:
             await asyncio.sleep(every)
             self.recorder.flush()
 
+    async def catch_up(self, after: float, limit: float) -> None:
+        """After `after` s, subscribe with history once more for `limit` s and write what
+        was sent before this recorder began and is still missing (`write` skips the
+        rest); log how many that was."""
+        await asyncio.sleep(after)
+        sub = self.ctx.bus.subscribe(ALL, history=True)
+        before = self.ctx.counters["recovered"]
+        try:
+            async with asyncio.timeout(limit):
+                async for sample in sub:
+                    if 0 < sample.sent_ns < self.began_ns and not keys.is_heartbeat(sample.key):
+                        self.write(sample)
+        except TimeoutError:
+            pass
+        finally:
+            await sub.close()
+        caught = self.ctx.counters["recovered"] - before
+        self.ctx.counters["caught_up"] += caught
+        (self.ctx.log.warning if caught else self.ctx.log.info)("caught_up", samples=caught)
+
     async def drain_rest(self, it: object) -> None:
         """Write what is queued or still arriving until `drain` s pass with nothing new."""
         try:
@@ -108,8 +138,10 @@ class Monitor:
             return
         log_ns = time.time_ns()
         if self.before is not None and 0 < sample.sent_ns < self.began_ns:
-            if self.before.has(sample.key, sample.sent_ns, sample.seq):
+            mark = (sample.key, sample.sent_ns, sample.seq)
+            if mark in self.recovered or self.before.has(*mark):
                 return
+            self.recovered.add(mark)
             log_ns = sample.sent_ns  # recovered: sent while no recorder ran
             self.ctx.counters["recovered"] += 1
         written = self.recorder.write(
@@ -164,6 +196,8 @@ def monitor_main(settings: MonitorSettings) -> ServiceMain:
         if settings.flush_every > 0:
             ctx.start(monitor.flush(settings.flush_every), name="flush")
         ctx.start(monitor.health(ctx.bus.watch_alive(keys.ALIVE_ALL)), name="health")
+        if resume:
+            ctx.start(monitor.catch_up(CATCH_UP_AFTER, CATCH_UP_LIMIT), name="catch_up")
         ctx.log.info(
             "recording",
             output=settings.output,
