@@ -69,7 +69,7 @@ test-fast: venv
 lint: venv
 	$(BIN)/ruff check shared services domains tests benchmarks docs/tutorial docs/robot-body
 	$(BIN)/mypy --strict shared/src/cbdi docs/tutorial/robot.py docs/robot-body/body.py
-	$(BIN)/mypy services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src domains/courier/src
+	$(BIN)/mypy --strict services/world/src services/monitor/src services/scheduler/src services/executor/src services/planner/src domains/recycling/src domains/courier/src
 
 bench: venv
 	$(BIN)/python benchmarks/bus_latency.py

@@ -62,7 +62,7 @@ def _export(source: str | Path, target: Path) -> int:
                 channels[m.key] = writer.register_channel(m.key, "json", schema_id, metadata)
             writer.add_message(channels[m.key], m.log_ns, _to_json(m.payload), m.publish_ns, m.seq)
             count += 1
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     return count
 
 

@@ -169,12 +169,12 @@ class McapRecorder:
     def flush(self) -> None:
         """Write what was recorded so far (the chunk in progress) to the file."""
         if self._writer is not None:
-            self._writer.flush()
+            self._writer.flush()  # type: ignore[no-untyped-call]
 
     def finish_file(self) -> None:
         """Finish the current file (summary, index, footer) so it is readable."""
         if self._writer is not None:
-            self._writer.finish()
+            self._writer.finish()  # type: ignore[no-untyped-call]
             self._writer = None
         if self._stream is not None:
             self._stream.close()

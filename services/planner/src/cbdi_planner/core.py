@@ -47,4 +47,5 @@ def compiled(name: str | None = None) -> ModuleType | None:
                 "`make venv` (it needs Rust's cargo: https://rustup.rs)"
             ) from None
         return None
-    return cbdi_planner_core
+    module: ModuleType = cbdi_planner_core
+    return module

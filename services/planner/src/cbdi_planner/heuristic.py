@@ -18,6 +18,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 from cbdi_planner.core import compiled
 from cbdi_planner.relaxation import RelaxedOp, may_hold, relaxed_ops, widen
@@ -253,7 +254,8 @@ class RelaxedPlanGraph:
         if self._core is not None:
             facts = state.facts
             packed = facts.to_bytes((facts.bit_length() + 7) // 8, "little")
-            return self._core.explore(packed, state.open, state.til, state.nums, goals)
+            found = self._core.explore(packed, state.open, state.til, state.nums, goals)
+            return cast(tuple[list[int], list[int], list[int]] | None, found)
         layers = _Layers(
             [-1] * self.size,
             [-1] * self.size,

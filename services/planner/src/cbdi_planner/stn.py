@@ -21,7 +21,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any
+from typing import Any, cast
 
 from cbdi_planner.task import Snap, bit_positions
 
@@ -139,12 +139,12 @@ class Timeline:
     @property
     def times(self) -> Sequence[float]:
         """Each step's earliest time (a copy on the compiled core: read it once)."""
-        return self.net.times
+        return cast(Sequence[float], self.net.times)
 
     @property
     def edges(self) -> Sequence[Sequence[tuple[int, float]]]:
         """Each step's incoming edges `(earlier step, least distance)`."""
-        return self.net.edges
+        return cast(Sequence[Sequence[tuple[int, float]]], self.net.edges)
 
     @property
     def makespan(self) -> float:

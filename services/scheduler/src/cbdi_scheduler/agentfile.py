@@ -12,7 +12,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from cbdi.agentfile import (
     AgentFileError,
@@ -259,7 +259,7 @@ class _Reader:
         return belief
 
     def table(self, data: dict[str, Any], key: str) -> dict[str, Any]:
-        return self.opt(data, key, dict, {})
+        return cast(dict[str, Any], self.opt(data, key, dict, {}))
 
     def choice(
         self, table: dict[str, Any], key: str, options: tuple[str, ...], default: str, prefix: str
