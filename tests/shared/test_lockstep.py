@@ -354,3 +354,46 @@ def test_the_gate_hears_by_zenoh_rules_and_never_a_key_zenoh_refuses() -> None:
     assert gate.hears(keys.epoch_ack("r2", "scheduler"))
     assert not gate.hears(keys.world_percepts("r2"))
     assert not gate.hears("cbdi//clock")  # an ack's garbage: nothing to wait for
+
+
+async def test_the_epochs_go_stage_by_stage_each_acknowledged_after_its_body() -> None:
+    """`Lockstep.epochs`, the one way in: each stage waits for its needs, yields what
+    they released, and is acknowledged (with what the body sent) only once the body is
+    done; a need not met is given up after the timeout and its sender logged late."""
+    from cbdi.runtime.log import Log
+
+    network = MemoryNetwork()
+    member = network.bus()
+    heard = messages(network.bus(), keys.epoch_ack("r1", "scheduler"), EpochAck, LogSink())
+    step = Lockstep([BELIEFS, "cbdi/r1/planner/ack"], lambda first: None, bus=member, me=S)
+    asked: list[tuple[int, str, frozenset[str]]] = []
+
+    def needs(epoch: int, stage: str, members: frozenset[str]) -> list[Need]:
+        asked.append((epoch, stage, members))
+        return [Need("r1/planner", epoch)] if stage == "done" else []
+
+    def planner_ack(epoch: int) -> Stamped:
+        msg = EpochAck(agent="r1", component="planner", epoch=epoch, stage="done", sent={})
+        return Stamped("cbdi/r1/planner/ack", epoch + 1, epoch + 1, msg)
+
+    await step.gate.put(planner_ack(0))
+    import io
+
+    stream = io.StringIO()
+    log = Log("scheduler", stream=stream)
+    seen: list[tuple[int, str, list[str]]] = []
+    epochs = step.epochs(0, needs, 0.05, log, ("beliefs", "done"), [S, "r1/planner"])
+    async for epoch in epochs:
+        seen.append((epoch.number, epoch.stage, epoch.late))
+        await member.publish(PLANS, b"x")  # the body's sending, in the ack after it
+        if len(seen) == 4:
+            break
+    assert seen == [(0, "beliefs", []), (0, "done", []), (1, "beliefs", []),
+                    (1, "done", ["r1/planner"])]  # fmt: skip
+    assert [a[:2] for a in asked] == [(0, "beliefs"), (0, "done"), (1, "beliefs"), (1, "done")]
+    assert asked[0][2] == {S, "r1/planner"}
+    acks = [(await anext(heard))[1] for _ in range(3)]  # the fourth body never ended
+    assert [(a.epoch, a.stage, a.sent.get(PLANS)) for a in acks] == [
+        (0, "beliefs", 1), (0, "done", 2), (1, "beliefs", 3)
+    ]  # fmt: skip
+    assert "event=upstream_late epoch=1 late=r1/planner" in stream.getvalue()

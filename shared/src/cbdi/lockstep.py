@@ -32,7 +32,8 @@ liveliness token comes back (`announce_ready`); an ack seen twice changes no gat
 from __future__ import annotations
 
 import weakref
-from collections.abc import Callable, Sequence
+from collections.abc import AsyncIterator, Callable, Sequence
+from dataclasses import dataclass
 
 from cbdi import keys
 from cbdi.bus.base import Bus
@@ -40,6 +41,7 @@ from cbdi.bus.typed import Stamped, publish, request
 from cbdi.clock import WallClock
 from cbdi.epoch_gate import WORLD, EpochGate, GateResult, Need, default_sender, stage_rank
 from cbdi.errors import CbdiError
+from cbdi.runtime.log import Log
 from cbdi.view import world_info
 from cbdi.wire.base import Message
 from cbdi.wire.world import (
@@ -51,6 +53,7 @@ from cbdi.wire.world import (
 
 __all__ = [
     "WORLD",
+    "Epoch",
     "EpochGate",
     "GateResult",
     "Lockstep",
@@ -70,12 +73,27 @@ MAX_SENT_KEYS = 64
 _LATEST: weakref.WeakKeyDictionary[Bus, dict[str, EpochAck]] = weakref.WeakKeyDictionary()
 
 
+# What a component waits for before a stage of an epoch: (epoch, stage, members) -> needs.
+NeedsOf = Callable[[int, str, frozenset[str]], list[Need]]
+
+
+@dataclass(frozen=True)
+class Epoch:
+    """One stage of one epoch, released: the inputs to take in, in order, before the
+    component does its part (`Lockstep.epochs` acknowledges it when the body is done)."""
+
+    number: int
+    stage: str
+    messages: list[tuple[str, Message]]
+    late: list[str]
+
+
 class Lockstep:
     """A component's mode, decided by the world's first tick, and its gate.
 
     From the first `Tick` on, in lockstep, inputs go to the gate and `start(first_epoch)`
-    starts the component's epoch loop; in real time `put` hands each input back at once,
-    to be handled in arrival order as before.
+    starts the component's epoch loop, which is `async for epoch in lockstep.epochs(...)`;
+    in real time `put` hands each input back at once, to be handled in arrival order.
     """
 
     def __init__(
@@ -100,6 +118,37 @@ class Lockstep:
         info = await world_info(bus, timeout)
         self.gate.members = set(info.members)
         return list(info.members)
+
+    async def epochs(
+        self,
+        first: int,
+        needs: NeedsOf,
+        timeout: float | None,
+        log: Log,
+        stages: Sequence[str] = ("done",),
+        members: Sequence[str] | None = None,
+    ) -> AsyncIterator[Epoch]:
+        """The one way through the epochs, from `first` on: for each epoch and each of
+        `stages` in turn, wait until `needs(epoch, stage, members)` are met (or given up
+        after `timeout`, the late senders logged), yield what they released, and once the
+        body is done acknowledge that stage with what the component sent by then. The
+        members are `members`, or the world's (`learn_members`)."""
+        if self.bus is None or not self.me:
+            raise RuntimeError("Lockstep.epochs needs the bus and the member's name")
+        agent, _, component = self.me.partition("/")
+        if members is None:
+            members = await self.learn_members(self.bus)
+        self.gate.members = set(members)
+        known = frozenset(members)
+        epoch = first
+        while True:
+            for stage in stages:
+                released = await self.gate.wait(needs(epoch, stage, known), timeout)
+                if released.late:
+                    log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
+                yield Epoch(epoch, stage, released.messages, released.late)
+                await send_ack(self.bus, agent, component, epoch, stage)
+            epoch += 1
 
     def decided(self) -> bool:
         """Whether the first tick came (the start barrier is behind us)."""

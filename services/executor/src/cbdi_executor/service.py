@@ -21,7 +21,7 @@ from cbdi.bus import publish, request, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.clock import SimClock, WallClock
 from cbdi.errors import CbdiError, RequestTimeoutError
-from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
+from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready
 from cbdi.performer import outcomes_key, performer_key, stop_key
 from cbdi.plugins import percept_types
 from cbdi.robot import MEMBER
@@ -144,32 +144,29 @@ class ExecutorService:
         """Lockstep: the executor's part of each epoch, once the scheduler's is done."""
         scheduler = keys.member(self.agent, "scheduler")
         robot = keys.member(self.agent, MEMBER)  # its performers' process (cbdi.robot)
-        members = await self.lockstep.learn_members(self.ctx.bus)
-        epoch = first
-        while True:
-            needs = [Need(WORLD, epoch)]
+
+        def needs(epoch: int, _stage: str, members: frozenset[str]) -> list[Need]:
+            found = [Need(WORLD, epoch)]
             if scheduler in members:
-                needs.append(Need(scheduler, epoch))
+                found.append(Need(scheduler, epoch))
             if robot in members:  # the outcomes of its calls that ended by this epoch
-                needs.append(Need(robot, epoch, "beliefs"))
-            released = await self.lockstep.gate.wait(needs, self.ack_timeout)
-            if released.late:
-                self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
+                found.append(Need(robot, epoch, "beliefs"))
+            return found
+
+        async for epoch in self.lockstep.epochs(first, needs, self.ack_timeout, self.ctx.log):
             # Take in the whole epoch (outcomes, beliefs, plans, arrests) before anything
             # is dispatched: an outcome handled first would start the next step of a
             # plan the scheduler arrests in the same epoch.
             self.taking_in = True
             try:
-                for key, msg in released.messages:
+                for key, msg in epoch.messages:
                     if not isinstance(msg, (EpochAck, Percept)):
                         with dropping(self.ctx, key, msg):
                             await self.handle(msg)
             finally:
                 self.taking_in = False
             await self.step()
-            self.acked = epoch
-            await send_ack(self.ctx.bus, self.agent, "executor", epoch)
-            epoch += 1
+            self.acked = epoch.number  # acknowledged as the loop goes on
 
     async def handle(self, msg: Message) -> None:
         now = self.clock.now()

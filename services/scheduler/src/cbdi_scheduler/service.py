@@ -19,7 +19,7 @@ from cbdi.beliefs import BeliefsSender
 from cbdi.bus import publish, sequenced_inputs, serve
 from cbdi.bus.typed import Stamped, dropping
 from cbdi.errors import CbdiError
-from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready, send_ack
+from cbdi.lockstep import WORLD, Lockstep, Need, announce_ready
 from cbdi.peers import Peers
 from cbdi.plugins import percept_types
 from cbdi.runtime import ServiceContext, ServiceSettings
@@ -177,7 +177,6 @@ class SchedulerService:
         a = self.agent
         if not self.members:
             self.members = await self.lockstep.learn_members(self.ctx.bus)
-        self.lockstep.gate.members = set(self.members)
         own = [keys.member(a, c) for c in ("executor", "planner")]
         executor, planner = (m if m in self.members else "" for m in own)
         peers = sorted(
@@ -185,23 +184,21 @@ class SchedulerService:
         )
         if self.mind.claims is None:
             peers = []
-        epoch = first
-        while True:
-            before = [Need(s, epoch - 1) for s in ([executor] if executor else []) + peers]
-            await self.gated([*before, Need(WORLD, epoch)], epoch)
-            await send_ack(self.ctx.bus, a, "scheduler", epoch, "beliefs")
-            await self.gated([Need(planner, epoch)] if planner else [], epoch)
-            await send_ack(self.ctx.bus, a, "scheduler", epoch, "done")
-            epoch += 1
 
-    async def gated(self, needs: list[Need], epoch: int) -> None:
-        """Wait for `needs`, then handle what they release, in order."""
-        released = await self.lockstep.gate.wait(needs, self.ack_timeout)
-        if released.late:
-            self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
-        for key, msg in released.messages:
-            with dropping(self.ctx, key, msg):
-                await self.on_message(msg)
+        def needs(epoch: int, stage: str, _members: frozenset[str]) -> list[Need]:
+            if stage == "done":
+                return [Need(planner, epoch)] if planner else []
+            before = [Need(s, epoch - 1) for s in ([executor] if executor else []) + peers]
+            return [*before, Need(WORLD, epoch)]
+
+        stages = ("beliefs", "done")
+        epochs = self.lockstep.epochs(
+            first, needs, self.ack_timeout, self.ctx.log, stages, self.members
+        )
+        async for epoch in epochs:
+            for key, msg in epoch.messages:
+                with dropping(self.ctx, key, msg):
+                    await self.on_message(msg)
 
     async def watch_peers(self) -> None:
         """React to the agent's planner and executor (re)appearing (`on_planner`,

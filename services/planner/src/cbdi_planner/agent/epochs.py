@@ -9,7 +9,7 @@ from collections.abc import AsyncIterator
 from cbdi import keys
 from cbdi.beliefs import BeliefsReceiver
 from cbdi.bus.typed import Stamped, dropping
-from cbdi.lockstep import Lockstep, Need, default_sender, send_ack
+from cbdi.lockstep import Lockstep, Need, default_sender
 from cbdi.runtime import ServiceContext
 from cbdi.wire.agent import ActionStatus, BeliefsUpdate
 from cbdi.wire.base import Message
@@ -89,23 +89,20 @@ class Epochs(ABC):
     async def epochs(self, first: int) -> None:
         """Lockstep: once the scheduler's beliefs of an epoch (and the executor's
         reports of the one before) are in, handle them, plan for the epoch, acknowledge."""
-        a = self.agent
-        members = await self.lockstep.learn_members(self.ctx.bus)
-        executor, scheduler = keys.member(a, "executor"), keys.member(a, "scheduler")
-        epoch = first
-        while True:
-            needs = [Need(executor, epoch - 1)] if executor in members else []
+        executor = keys.member(self.agent, "executor")
+        scheduler = keys.member(self.agent, "scheduler")
+
+        def needs(epoch: int, _stage: str, members: frozenset[str]) -> list[Need]:
+            found = [Need(executor, epoch - 1)] if executor in members else []
             if scheduler in members:
-                needs.append(Need(scheduler, epoch, "beliefs"))
-            released = await self.lockstep.gate.wait(needs, self.ack_timeout)
-            if released.late:
-                self.ctx.log.warning("upstream_late", epoch=epoch, late=",".join(released.late))
-            for key, msg in released.messages:
+                found.append(Need(scheduler, epoch, "beliefs"))
+            return found
+
+        async for epoch in self.lockstep.epochs(first, needs, self.ack_timeout, self.ctx.log):
+            for key, msg in epoch.messages:
                 if not isinstance(msg, Tick | EpochAck):
                     await self.checked_handle(key, msg)
             await self.plan_epoch()
-            await send_ack(self.ctx.bus, a, "planner", epoch)
-            epoch += 1
 
     async def checked_handle(self, key: str, msg: Message) -> None:
         """Handle one input; bad input is reported, never fatal."""
