@@ -11,8 +11,12 @@ from cbdi_world.lateness import Lateness
 
 def test_the_distribution_of_lateness_and_the_epochs_over_a_tenth() -> None:
     tally = Lateness(epoch_wall=1.0)
+    over = []
     for k, late in enumerate([0.0, 0.01, 0.02, 0.05, 0.3, -0.01, 0.09, 0.0, 0.0, 2.0]):
-        tally.observe(due=float(k), out=k + late)  # an early one counts as on time
+        said = tally.observe(due=float(k), out=k + late)  # an early one counts as on time
+        if said is not None:
+            over.append((k, round(said, 6)))
+    assert over == [(4, 0.3), (9, 2.0)]  # the epochs over the bound, as the world logs them
     s = tally.summary()
     assert s is not None
     assert (s.epochs, s.bound, s.over, s.max) == (10, 0.1, 2, 2.0)

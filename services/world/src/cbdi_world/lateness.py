@@ -28,10 +28,14 @@ class Lateness:
         self.epoch_wall = epoch_wall
         self.late: list[float] = []
 
-    def observe(self, due: float, out: float) -> None:
-        """Note an epoch due at wall time `due` whose publication ended at `out`."""
-        if self.epoch_wall > 0:
-            self.late.append(max(0.0, out - due))
+    def observe(self, due: float, out: float) -> float | None:
+        """Note an epoch due at wall time `due` whose publication ended at `out`; return
+        its lateness if it is over the bound (`BOUND` of an epoch), else None."""
+        if self.epoch_wall <= 0:
+            return None
+        late = max(0.0, out - due)
+        self.late.append(late)
+        return late if late > BOUND * self.epoch_wall else None
 
     def summary(self) -> EpochLateness | None:
         """The distribution so far; None for a run not paced (flat out) or no epoch yet."""

@@ -251,7 +251,9 @@ class WorldService:
         self.save(result)
         await self.publish_epoch(result)
         if due is not None:
-            self.lateness.observe(due, self.clock.now())
+            late = self.lateness.observe(due, self.clock.now())
+            if late is not None:  # what the agents act on came late: say which and how
+                self.ctx.log.warning("epoch_late", epoch=result.epoch, seconds=round(late, 4))
         self.note(Published(result.epoch))
         await self.check_end()
 
