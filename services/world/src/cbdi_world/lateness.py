@@ -28,14 +28,23 @@ class Lateness:
         self.epoch_wall = epoch_wall
         self.late: list[float] = []
 
-    def observe(self, due: float, out: float) -> float | None:
-        """Note an epoch due at wall time `due` whose publication ended at `out`; return
-        its lateness if it is over the bound (`BOUND` of an epoch), else None."""
+    def observe(
+        self, due: float, out: float, woke: float | None = None, begin: float | None = None
+    ) -> dict[str, float] | None:
+        """Note an epoch due at wall time `due` whose publication ended at `out`. If it
+        is over the bound (`BOUND` of an epoch), return its lateness (`seconds`) and,
+        given when the world woke to step it (`woke`) and began to publish (`begin`),
+        where the time went: `woke` late, the simulator's `step`, the `publish`."""
         if self.epoch_wall <= 0:
             return None
         late = max(0.0, out - due)
         self.late.append(late)
-        return late if late > BOUND * self.epoch_wall else None
+        if late <= BOUND * self.epoch_wall:
+            return None
+        parts = {"seconds": late}
+        if woke is not None and begin is not None:
+            parts |= {"woke": woke - due, "step": begin - woke, "publish": out - begin}
+        return {k: round(v, 4) for k, v in parts.items()}
 
     def summary(self) -> EpochLateness | None:
         """The distribution so far; None for a run not paced (flat out) or no epoch yet."""

@@ -230,7 +230,8 @@ class WorldService:
         while self.finished is None:
             await self.pace(start)
             due = start + (self.world.epoch + 1) * self.epoch_wall()
-            await self.advance(self.world.step(), due)
+            woke = self.clock.now()
+            await self.advance(self.world.step(), due, woke)
         self.ctx.log.info("finished", reason=self.finished.reason, epoch=self.finished.epoch)
         if self.keeper is not None:
             if self.settings.resume == RESUME_IF_FOUND:
@@ -244,16 +245,19 @@ class WorldService:
             self.ctx.log.info("lingered", seconds=self.settings.linger)
             self.ctx.stop()
 
-    async def advance(self, result: EpochResult, due: float | None = None) -> None:
+    async def advance(
+        self, result: EpochResult, due: float | None = None, woke: float | None = None
+    ) -> None:
         """Save the epoch the simulator reached, publish it, note that, see if the run
-        ended; `due`: the wall time it was due at (paced), to tell how late it went out."""
+        ended; `due`, `woke`: when it was due (paced) and the world woke to step it."""
         self.served.clear()
+        begin = self.clock.now()
         self.save(result)
         await self.publish_epoch(result)
         if due is not None:
-            late = self.lateness.observe(due, self.clock.now())
-            if late is not None:  # what the agents act on came late: say which and how
-                self.ctx.log.warning("epoch_late", epoch=result.epoch, seconds=round(late, 4))
+            late = self.lateness.observe(due, self.clock.now(), woke, begin)
+            if late is not None:  # what the agents act on came late: say which and why
+                self.ctx.log.warning("epoch_late", epoch=result.epoch, **late)
         self.note(Published(result.epoch))
         await self.check_end()
 
